@@ -1,0 +1,1 @@
+"""Analysis of evo runs: ablation statistics, plots and early-slope prediction (SPEC section 7)."""

@@ -1,0 +1,1 @@
+"""evo: computational design of modular robots by evolution (structure) and PPO (behaviour)."""

@@ -1,0 +1,1 @@
+"""Simulation environments: the reach-the-target task (SPEC section 3)."""

@@ -1,0 +1,76 @@
+"""A gallery of robots: their files, a table of their sizes and a contact sheet."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+from rich.console import Console
+from rich.table import Table
+
+from evo.robot.builder import PhysicsParams
+from evo.robot.io import save_robot
+from evo.robot.tree import ModuleType, Robot
+
+
+def size_table(robots: Sequence[Robot]) -> Table:
+    """One row per robot: name, module counts, m, n, observation and action sizes."""
+    table = Table(title=f"{len(robots)} robots")
+    columns = ("name", "modules", "motors m", "pivots n", "main", "wheels", "depth", "obs", "act")
+    for column in columns:
+        table.add_column(column, justify="left" if column == "name" else "right", no_wrap=True)
+    for robot in robots:
+        table.add_row(
+            robot.name,
+            str(len(robot)),
+            str(robot.n_motors),
+            str(robot.n_pivots),
+            str(robot.count(ModuleType.MAIN)),
+            str(robot.count(ModuleType.WHEEL)),
+            str(robot.depth),
+            str(robot.obs_size),
+            str(robot.action_size),
+        )
+    return table
+
+
+def write_gallery(
+    robots: Sequence[Robot],
+    out: Path,
+    params: PhysicsParams,
+    render: bool,
+    console: Console | None = None,
+) -> list[Path]:
+    """Save every robot as ``out/<name>.json`` and, if ``render``, a contact sheet.
+
+    Returns:
+        The files written.
+    """
+    console = console or Console()
+    out.mkdir(parents=True, exist_ok=True)
+    written = [save_robot(robot, out / f"{robot.name}.json") for robot in robots]
+    console.print(size_table(robots))
+    if render:
+        from evo.robot.render import RenderError, render_image
+
+        try:
+            images = [render_image(robot, 320, 240, params) for robot in robots]
+        except RenderError as err:
+            console.print(f"[yellow]no pictures: {err}[/yellow]")
+            return written
+        cols = min(4, len(images))
+        rows = -(-len(images) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+        for ax in axes.flat:
+            ax.axis("off")
+        for ax, robot, image in zip(axes.flat, robots, images, strict=False):
+            ax.imshow(image)
+            ax.set_title(f"{robot.name}  m={robot.n_motors} n={robot.n_pivots}", fontsize=8)
+        fig.tight_layout()
+        sheet = out / "robots.png"
+        fig.savefig(sheet, dpi=100)
+        plt.close(fig)
+        written.append(sheet)
+        console.print(f"contact sheet: {sheet}")
+    return written
