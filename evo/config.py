@@ -75,7 +75,7 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
         plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
         if not isinstance(plain, Mapping):
             raise ConfigError(f"{key}: expected a mapping, got {plain!r}")
-        raw = dict(plain)
+        raw = {str(k): v for k, v in plain.items()}
     assert dataclasses.is_dataclass(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(raw) - set(fields))
