@@ -1,0 +1,217 @@
+"""Arenas of the reach task (SPEC section 3): floor, walls, movable rocks and a target.
+
+An arena is a square of side ``side`` with walls, the robot starting at its centre.
+``clean`` is floor + walls; ``cluttered`` also has ``n_rocks`` movable rocks of five fixed
+types (rock ``i`` has type ``i mod 5``), re-scattered around the target every episode.
+The target itself is a mocap marker without collision: the task measures distances to
+it in numpy, the marker only shows it in pictures and replays.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+SHAPES = ("box", "sphere", "cylinder", "ellipsoid")
+
+
+@dataclass(frozen=True, slots=True)
+class RockType:
+    """One rock shape.
+
+    Attributes:
+        shape: MuJoCo geom type: box, sphere, cylinder (upright) or ellipsoid.
+        size: MuJoCo size, m: half extents (box, ellipsoid), radius (sphere), radius and
+            half height (cylinder).
+    """
+
+    shape: str
+    size: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        expected = {"box": 3, "sphere": 1, "cylinder": 2, "ellipsoid": 3}
+        if self.shape not in expected:
+            raise ValueError(f"rock shape must be one of {', '.join(SHAPES)}, got {self.shape!r}")
+        if len(self.size) != expected[self.shape] or min(self.size) <= 0:
+            raise ValueError(
+                f"a {self.shape} rock needs {expected[self.shape]} positive sizes, got {self.size}"
+            )
+
+    @property
+    def half_height(self) -> float:
+        """Height of the rock's centre when it rests on the floor, m."""
+        return self.size[0] if self.shape == "sphere" else self.size[-1]
+
+    @property
+    def radius(self) -> float:
+        """Horizontal bounding radius, m (used to keep rocks apart when scattering)."""
+        if self.shape == "box":
+            return math.hypot(self.size[0], self.size[1])
+        if self.shape == "ellipsoid":
+            return max(self.size[0], self.size[1])
+        return self.size[0]
+
+
+DEFAULT_ROCKS = (
+    RockType("box", (0.04, 0.04, 0.04)),
+    RockType("box", (0.07, 0.035, 0.02)),
+    RockType("sphere", (0.04,)),
+    RockType("cylinder", (0.045, 0.025)),
+    RockType("ellipsoid", (0.06, 0.04, 0.03)),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class ArenaParams:
+    """The world around the robot.
+
+    Attributes:
+        side: Side of the square arena, m (the paper's L).
+        wall_height: Height of the walls, m.
+        wall_thickness: Thickness of the walls, m.
+        n_rocks: Rocks per episode (0 = clean arena).
+        rock_types: The rock shapes; rock i has type i mod len(rock_types).
+        rock_density: Density of the rocks, kg/m^3 (light enough to be pushed).
+        rock_spread: Rocks are scattered within this distance of the target, m.
+        start_clearance: No rock centre closer than this to the arena centre, m.
+        target_clearance: No rock centre closer than this to the target, m.
+    """
+
+    side: float = 4.0
+    wall_height: float = 0.1
+    wall_thickness: float = 0.05
+    n_rocks: int = 0
+    rock_types: tuple[RockType, ...] = field(default=DEFAULT_ROCKS)
+    rock_density: float = 300.0
+    rock_spread: float = 0.6
+    start_clearance: float = 0.35
+    target_clearance: float = 0.12
+
+    def __post_init__(self) -> None:
+        for key in ("side", "wall_height", "wall_thickness", "rock_density", "rock_spread"):
+            if getattr(self, key) <= 0:
+                raise ValueError(f"{key} must be positive, got {getattr(self, key)}")
+        if self.n_rocks < 0:
+            raise ValueError(f"n_rocks must be >= 0, got {self.n_rocks}")
+        if self.n_rocks and not self.rock_types:
+            raise ValueError("rock_types must list at least one rock when n_rocks > 0")
+        if self.start_clearance < 0 or self.target_clearance < 0:
+            raise ValueError("start_clearance and target_clearance must be >= 0")
+
+    @classmethod
+    def clean(cls) -> ArenaParams:
+        """Floor and walls only."""
+        return cls()
+
+    @classmethod
+    def cluttered(cls) -> ArenaParams:
+        """Floor, walls and 40 rocks around the target."""
+        return cls(n_rocks=40)
+
+    @property
+    def rocks(self) -> tuple[RockType, ...]:
+        """The type of every rock, in body order."""
+        return tuple(self.rock_types[i % len(self.rock_types)] for i in range(self.n_rocks))
+
+
+def _fmt(values: npt.ArrayLike) -> str:
+    return " ".join(f"{v:.6g}" for v in np.asarray(values, dtype=float).ravel())
+
+
+def arena_scene(params: ArenaParams, target_radius: float) -> ET.Element:
+    """The arena as MJCF world elements, to be added by the robot builder's scene hook.
+
+    Returns:
+        A ``<worldbody>`` holding the floor, the four walls, the rocks (free bodies
+        ``rock0``, ``rock1``, ...) and the ``target`` mocap marker.
+    """
+    world = ET.Element("worldbody")
+    half = params.side / 2
+    ET.SubElement(
+        world, "geom", name="floor", type="plane", size=_fmt([half + 0.5, half + 0.5, 0.1]),
+        material="grid",
+    )
+    t, h = params.wall_thickness, params.wall_height
+    for i, (x, y, sx, sy) in enumerate(
+        [(half + t / 2, 0, t / 2, half + t), (-half - t / 2, 0, t / 2, half + t),
+         (0, half + t / 2, half + t, t / 2), (0, -half - t / 2, half + t, t / 2)]
+    ):
+        ET.SubElement(
+            world, "geom", name=f"wall{i}", type="box", pos=_fmt([x, y, h / 2]),
+            size=_fmt([sx, sy, h / 2]), rgba=".55 .5 .45 1",
+        )
+    for i, rock in enumerate(params.rocks):
+        body = ET.SubElement(world, "body", name=f"rock{i}", pos=_fmt([0, 0, rock.half_height]))
+        ET.SubElement(body, "freejoint", name=f"rock{i}")
+        ET.SubElement(
+            body, "geom", name=f"rock{i}", type=rock.shape, size=_fmt(rock.size),
+            density=f"{params.rock_density:.6g}", rgba=".5 .42 .35 1",
+        )
+    target = ET.SubElement(world, "body", name="target", mocap="true", pos="1 0 0")
+    ET.SubElement(
+        target, "geom", name="target", type="cylinder", size=_fmt([target_radius, 0.001]),
+        contype="0", conaffinity="0", rgba=".9 .15 .15 .6",
+    )
+    return world
+
+
+def scatter_rocks(
+    params: ArenaParams, target: npt.NDArray[np.float64], rng: np.random.Generator
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Random rest positions and yaw orientations of the rocks around ``target``.
+
+    Rocks lie within ``rock_spread`` of the target and inside the walls, never closer
+    than ``start_clearance`` to the arena centre (where the robot starts) and at least
+    ``target_clearance`` from the target. They also avoid each other: each rock gets up
+    to 64 draws to find a free spot; when the neighbourhood is full it may touch
+    another rock, and the physics pushes them apart on the first step.
+
+    Returns:
+        Positions ``(n_rocks, 3)`` and quaternions ``(n_rocks, 4)`` (w, x, y, z).
+    """
+    rocks = params.rocks
+    radii = np.array([rock.radius for rock in rocks])
+    pos = np.zeros((len(rocks), 3))
+    for i, rock in enumerate(rocks):
+        for _ in range(64):
+            xy = _draw_near(params, rock, target, rng)
+            if np.all(np.hypot(*(pos[:i, :2] - xy).T) >= radii[:i] + rock.radius):
+                break
+        pos[i] = (*xy, rock.half_height + 0.001)
+    yaw = rng.uniform(0, 2 * math.pi, size=len(rocks))
+    zero = np.zeros(len(rocks))
+    return pos, np.stack([np.cos(yaw / 2), zero, zero, np.sin(yaw / 2)], axis=1)
+
+
+def _draw_near(
+    params: ArenaParams, rock: RockType, target: npt.NDArray[np.float64], rng: np.random.Generator
+) -> npt.NDArray[np.float64]:
+    """One spot for ``rock`` near the target that meets the hard constraints."""
+    margin = params.side / 2 - params.wall_thickness / 2 - rock.radius
+    for _ in range(10_000):
+        r = params.rock_spread * math.sqrt(rng.random())
+        a = rng.uniform(0, 2 * math.pi)
+        xy = target[:2] + r * np.array([math.cos(a), math.sin(a)])
+        if (
+            np.abs(xy).max() <= margin
+            and math.hypot(*xy) >= params.start_clearance + rock.radius
+            and math.hypot(*(xy - target[:2])) >= params.target_clearance + rock.radius
+        ):
+            return xy
+    raise ValueError(
+        f"no room for a rock within rock_spread={params.rock_spread} m of the target at "
+        f"{target[:2].round(3).tolist()} outside start_clearance={params.start_clearance} m"
+    )
+
+
+def sample_target(
+    rng: np.random.Generator, r_min: float, r_max: float
+) -> npt.NDArray[np.float64]:
+    """A target uniform in area over the annulus ``r_min <= r <= r_max`` (z = 0)."""
+    r = math.sqrt(rng.uniform(r_min**2, r_max**2))
+    a = rng.uniform(0, 2 * math.pi)
+    return np.array([r * math.cos(a), r * math.sin(a), 0.0])

@@ -1,0 +1,135 @@
+"""``ReachEnv``: the reach task as a batched TorchRL environment (the training fast path).
+
+One ``ReachEnv`` holds ``num_envs`` arenas of one robot in one process
+(``batch_size=[num_envs]``); the physics of all arenas advances in one
+``mujoco.rollout`` call per control step (see ``evo.envs.task``). Besides
+``observation``, ``reward`` and the done flags, every step carries
+
+* ``reward_terms/<name>``: each named reward term (they sum to ``reward``);
+* ``success`` and ``unstable``: why an episode ended;
+* ``episode_return`` and ``episode_length``: running totals of the current episode, so
+  a learner reads the return of every completed episode at its done step.
+
+Partial resets follow TorchRL's ``_reset`` mask, so collectors reset only the arenas
+whose episodes ended.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from evo.envs.arena import ArenaParams
+from evo.envs.task import REWARD_TERMS, ReachCore, TaskParams
+from evo.robot.builder import PhysicsParams
+from evo.robot.tree import Robot
+
+
+def _flags(n: int) -> Categorical:
+    return Categorical(2, shape=(n, 1), dtype=torch.bool)
+
+
+def _column(values: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    return torch.as_tensor(values.reshape(-1, 1), dtype=dtype)
+
+
+class ReachEnv(EnvBase):  # type: ignore[misc]
+    """The reach task over ``num_envs`` arenas of one robot.
+
+    Args:
+        robot: The robot structure.
+        physics: Module constants.
+        arena: The arena (``ArenaParams.clean()`` or ``.cluttered()``).
+        task: Task constants.
+        num_envs: Number of arenas (the batch size).
+        nthread: Threads MuJoCo uses to step the arenas.
+        seed: Seed of targets and rocks (``set_seed`` changes it later).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        physics: PhysicsParams | None = None,
+        arena: ArenaParams | None = None,
+        task: TaskParams | None = None,
+        num_envs: int = 1,
+        nthread: int = 1,
+        seed: int | None = None,
+    ) -> None:
+        super().__init__(batch_size=torch.Size([num_envs]), device="cpu")
+        self.core = ReachCore(robot, physics, arena, task, num_envs, nthread, seed)
+        n = num_envs
+        self.observation_spec = Composite(
+            observation=Unbounded((n, self.core.obs_size), dtype=torch.float32),
+            reward_terms=Composite(
+                {name: Unbounded((n, 1), dtype=torch.float32) for name in REWARD_TERMS},
+                shape=(n,),
+            ),
+            success=_flags(n),
+            unstable=_flags(n),
+            episode_return=Unbounded((n, 1), dtype=torch.float32),
+            episode_length=Unbounded((n, 1), dtype=torch.int64),
+            shape=(n,),
+        )
+        self.action_spec = Bounded(-1.0, 1.0, (n, self.core.action_size), dtype=torch.float32)
+        self.reward_spec = Unbounded((n, 1), dtype=torch.float32)
+        self.done_spec = Composite(
+            done=_flags(n), terminated=_flags(n), truncated=_flags(n), shape=(n,)
+        )
+
+    @property
+    def num_envs(self) -> int:
+        """Number of arenas."""
+        return self.core.num_envs
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: object) -> TensorDict:
+        mask = None
+        if tensordict is not None and "_reset" in tensordict.keys():
+            mask = tensordict.get("_reset").reshape(-1).numpy()
+        observation = self.core.reset(mask)
+        n = self.num_envs
+        zeros = torch.zeros((n, 1))
+        false = torch.zeros((n, 1), dtype=torch.bool)
+        return TensorDict(
+            {
+                "observation": torch.from_numpy(observation),
+                "reward_terms": TensorDict(
+                    {name: zeros.clone() for name in REWARD_TERMS}, batch_size=(n,)
+                ),
+                "success": false.clone(),
+                "unstable": false.clone(),
+                "episode_return": zeros.clone(),
+                "episode_length": torch.zeros((n, 1), dtype=torch.int64),
+                "done": false.clone(),
+                "terminated": false.clone(),
+                "truncated": false.clone(),
+            },
+            batch_size=(n,),
+        )
+
+    def _step(self, tensordict: TensorDictBase) -> TensorDict:
+        step = self.core.step(tensordict.get("action").numpy())
+        n = self.num_envs
+        return TensorDict(
+            {
+                "observation": torch.from_numpy(step.observation),
+                "reward": _column(step.reward),
+                "reward_terms": TensorDict(
+                    {name: _column(v) for name, v in step.terms.items()}, batch_size=(n,)
+                ),
+                "success": _column(step.success, torch.bool),
+                "unstable": _column(step.unstable, torch.bool),
+                "episode_return": _column(step.episode_return),
+                "episode_length": _column(step.episode_length, torch.int64),
+                "done": _column(step.terminated | step.truncated, torch.bool),
+                "terminated": _column(step.terminated, torch.bool),
+                "truncated": _column(step.truncated, torch.bool),
+            },
+            batch_size=(n,),
+        )
+
+    def _set_seed(self, seed: int | None) -> None:
+        self.core.seed(seed)

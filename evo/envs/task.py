@@ -1,0 +1,339 @@
+"""The reach-the-target task over a batch of arenas, in numpy (SPEC section 3).
+
+``ReachCore`` is the one implementation of the task: the TorchRL ``ReachEnv`` and the
+gymnasium ``ReachGymEnv`` are thin faces over it. All ``N`` arenas hold the same robot
+and advance together: one call of a persistent ``mujoco.rollout.Rollout`` steps every
+arena ``frame_skip`` physics steps in C on ``nthread`` threads, then observations and
+rewards are computed for all arenas at once with numpy.
+
+Observation (``9 + 2(m + n)`` values, ``+3`` with ``observe_up``), in this order:
+
+====================  ====  ===========================================================
+brain linear velocity  3    m/s, in the brain frame
+brain angular velocity 3    rad/s, in the brain frame
+direction to target    2    unit vector in the brain's horizontal frame (x = heading)
+distance to target     1    m, closest horizontal distance of any module (the task's d)
+per motor              2    wheel speed / motor_max_speed, last command (both in [-1, 1])
+per pivot              2    hinge angle / pivot_range, last command (both in [-1, 1])
+gravity (observe_up)   3    unit vector of gravity in the brain frame
+====================  ====  ===========================================================
+
+Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``).
+
+Reward per control step, as named terms (their sum is the reward):
+
+* ``time``: ``-1 / t_max``;
+* ``approach``: ``((d_prev - d) / L) * (1 - d / L)``, positive when the robot gets closer
+  (the sign of the paper's Eq. 10 is reversed there; SPEC decision);
+* ``success``: ``+1`` on the step where ``d < success_radius``, which also terminates.
+
+An episode is truncated after ``t_max`` control steps. A numerical blow-up (non-finite
+state, or MuJoCo resetting the arena after a bad acceleration, which shows as time
+jumping back) ends only that arena's episode: it is truncated, flagged ``unstable``, its
+observation is held at the last good one and its step earns only the time penalty.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import mujoco
+import mujoco.rollout
+import numpy as np
+import numpy.typing as npt
+
+from evo.envs.arena import ArenaParams, arena_scene, sample_target, scatter_rocks
+from evo.robot.builder import BuiltRobot, PhysicsParams, build
+from evo.robot.tree import Robot
+
+F64 = npt.NDArray[np.float64]
+Bools = npt.NDArray[np.bool_]
+REWARD_TERMS = ("time", "approach", "success")
+_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+
+@dataclass(frozen=True, slots=True)
+class TaskParams:
+    """The reach task.
+
+    Attributes:
+        t_max: Control steps per episode before truncation.
+        frame_skip: Physics steps per control step (0.005 s x 10 = 20 Hz control).
+        success_radius: Success when any module is this close to the target
+            (horizontally), m.
+        target_min: Inner radius of the annulus the target is drawn from, m.
+        target_max: Outer radius of that annulus, m.
+        observe_up: Add gravity's direction in the brain frame to the observation.
+    """
+
+    t_max: int = 1000
+    frame_skip: int = 10
+    success_radius: float = 0.1
+    target_min: float = 0.5
+    target_max: float = 1.5
+    observe_up: bool = False
+
+    def __post_init__(self) -> None:
+        if self.t_max < 1 or self.frame_skip < 1:
+            raise ValueError(f"t_max and frame_skip must be >= 1, got {self.t_max}, {self.frame_skip}")
+        if self.success_radius <= 0:
+            raise ValueError(f"success_radius must be positive, got {self.success_radius}")
+        if not 0 <= self.target_min <= self.target_max:
+            raise ValueError(
+                f"need 0 <= target_min <= target_max, got {self.target_min}, {self.target_max}"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """What one control step returns for every arena (arrays over arenas)."""
+
+    observation: npt.NDArray[np.float32]
+    reward: F64
+    terms: dict[str, F64]
+    terminated: Bools
+    truncated: Bools
+    success: Bools
+    unstable: Bools
+    episode_return: F64
+    episode_length: npt.NDArray[np.int64]
+
+
+def build_scene(
+    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
+) -> BuiltRobot:
+    """The robot in its arena as MJCF (robot at the centre, rocks and target marker)."""
+    world = arena_scene(arena, task.success_radius)
+
+    def scene(root: ET.Element) -> None:
+        body = root.find("worldbody")
+        assert body is not None
+        body.extend(list(world))
+
+    return build(robot, physics, scene=scene)
+
+
+class ReachCore:
+    """``num_envs`` arenas of one robot, stepped together.
+
+    Args:
+        robot: The robot structure.
+        physics: Module constants.
+        arena: The arena (clean or cluttered).
+        task: Task constants.
+        num_envs: Number of arenas N.
+        nthread: Threads MuJoCo's rollout uses for the N arenas.
+        seed: Seed of the arenas' random targets and rocks.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        physics: PhysicsParams | None = None,
+        arena: ArenaParams | None = None,
+        task: TaskParams | None = None,
+        num_envs: int = 1,
+        nthread: int = 1,
+        seed: int | None = None,
+    ) -> None:
+        if num_envs < 1 or nthread < 1:
+            raise ValueError(f"num_envs and nthread must be >= 1, got {num_envs}, {nthread}")
+        self.robot = robot
+        self.physics = physics or PhysicsParams()
+        self.arena = arena or ArenaParams()
+        self.task = task or TaskParams()
+        self.built = build_scene(robot, self.physics, self.arena, self.task)
+        self.model = self.built.compile()
+        self.num_envs, self.nthread = num_envs, nthread
+        self.rng = np.random.default_rng(seed)
+        self._index_model()
+        self._allocate()
+        self.unstable_count = 0
+        self.warning_count = 0
+
+    # ---- set-up -------------------------------------------------------------------------
+    def _index_model(self) -> None:
+        m, built = self.model, self.built
+
+        def sensor(name: str) -> npt.NDArray[np.intp]:
+            s = m.sensor(name)
+            return np.arange(s.adr[0], s.adr[0] + s.dim[0])
+
+        self.i_linvel, self.i_angvel = sensor("brain_linvel"), sensor("brain_angvel")
+        self.i_origin = sensor("brain_origin")
+        self.i_xaxis, self.i_zaxis = sensor("brain_xaxis"), sensor("brain_zaxis")
+        self.i_modules = np.concatenate([sensor(f"{b}_pos") for b in built.bodies])
+        self.i_speed = np.array([sensor(f"{a}_speed")[0] for a in built.motors], dtype=np.intp)
+        self.i_angle = np.array([sensor(f"{a}_angle")[0] for a in built.pivots], dtype=np.intp)
+        self.n_modules = len(built.bodies)
+        self.pivot_limit = math.radians(self.physics.pivot_range)
+        self.ctrl_scale = np.array(
+            [self.physics.motor_max_speed] * len(built.motors)
+            + [self.pivot_limit] * len(built.pivots)
+        )
+        self.rock_qpos = np.array(
+            [m.jnt_qposadr[m.joint(f"rock{i}").id] for i in range(self.arena.n_rocks)],
+            dtype=np.intp,
+        )
+        self.target_mocap = int(m.body_mocapid[m.body("target").id])
+        self.nstate = mujoco.mj_stateSize(m, _FULL)
+
+    def _allocate(self) -> None:
+        n, k, m = self.num_envs, self.task.frame_skip, self.model
+        self.scratch = mujoco.MjData(m)
+        self.rollout = mujoco.rollout.Rollout(nthread=self.nthread)
+        self.models = [m] * n
+        self.datas = [mujoco.MjData(m) for _ in range(self.nthread)]
+        self.warning_counts = [data.warning.number for data in self.datas]
+        self.state = np.zeros((n, self.nstate))
+        self.sensordata = np.zeros((n, m.nsensordata))
+        self.ctrl = np.zeros((n, k, m.nu))
+        self.warmstart = np.zeros((n, m.nv))
+        self.state_out = np.zeros((n, k, self.nstate))
+        self.sensor_out = np.zeros((n, k, m.nsensordata))
+        self.target = np.zeros((n, 3))
+        self.action = np.zeros((n, m.nu))
+        self.distance = np.zeros(n)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.returns = np.zeros(n)
+        self.observation = np.zeros((n, self.obs_size), dtype=np.float32)
+
+    # ---- sizes ---------------------------------------------------------------------------
+    @property
+    def obs_size(self) -> int:
+        """Length of one observation."""
+        return self.robot.obs_size + (3 if self.task.observe_up else 0)
+
+    @property
+    def action_size(self) -> int:
+        """Length of one action, m + n."""
+        return int(self.model.nu)
+
+    def seed(self, seed: int | None) -> None:
+        """Re-seed the random targets and rocks."""
+        self.rng = np.random.default_rng(seed)
+
+    # ---- episodes ------------------------------------------------------------------------
+    def reset(self, mask: Bools | None = None) -> npt.NDArray[np.float32]:
+        """Start new episodes in the arenas where ``mask`` is true (all when None).
+
+        Returns:
+            The observation of every arena (new episodes and running ones).
+        """
+        chosen = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
+        m, d = self.model, self.scratch
+        for i in chosen:
+            target = sample_target(self.rng, self.task.target_min, self.task.target_max)
+            mujoco.mj_resetData(m, d)
+            if self.arena.n_rocks:
+                pos, quat = scatter_rocks(self.arena, target, self.rng)
+                d.qpos[self.rock_qpos[:, None] + np.arange(3)] = pos
+                d.qpos[self.rock_qpos[:, None] + np.arange(3, 7)] = quat
+            d.mocap_pos[self.target_mocap] = target
+            mujoco.mj_forward(m, d)
+            mujoco.mj_getState(m, d, self.state[i], _FULL)
+            self.sensordata[i] = d.sensordata
+            self.target[i] = target
+        self.action[chosen] = 0.0
+        self.steps[chosen] = 0
+        self.returns[chosen] = 0.0
+        observation, distance = self._observe()
+        self.observation[chosen] = observation[chosen]
+        self.distance[chosen] = distance[chosen]
+        return self.observation.copy()
+
+    def step(self, action: npt.ArrayLike) -> Step:
+        """Advance every arena one control step with ``action`` of shape (N, m + n)."""
+        act = np.clip(np.asarray(action, dtype=np.float64).reshape(self.num_envs, -1), -1, 1)
+        self.ctrl[:] = (act * self.ctrl_scale)[:, None, :]
+        self.rollout.rollout(
+            self.models, self.datas, self.state, self.ctrl, nstep=self.task.frame_skip,
+            initial_warmstart=self.warmstart, state=self.state_out, sensordata=self.sensor_out,
+            skip_checks=True,
+        )
+        self._count_warnings()
+        dt = self.model.opt.timestep * self.task.frame_skip
+        new_state, new_sensors = self.state_out[:, -1], self.sensor_out[:, -1]
+        unstable = ~np.isfinite(new_state).all(axis=1) | ~np.isfinite(new_sensors).all(axis=1)
+        unstable |= np.abs(new_state[:, 0] - self.state[:, 0] - dt) > 0.5 * self.model.opt.timestep
+        self.state[:] = new_state
+        self.sensordata[:] = new_sensors
+        self.action[:] = act
+        observation, distance = self._observe()
+        stable = ~unstable
+        self.observation[stable] = observation[stable]
+        L = self.arena.side
+        approach = np.where(stable, (self.distance - distance) / L * (1 - distance / L), 0.0)
+        success = stable & (distance < self.task.success_radius)
+        self.distance = np.where(stable, distance, self.distance)
+        terms = {
+            "time": np.full(self.num_envs, -1.0 / self.task.t_max),
+            "approach": approach,
+            "success": success.astype(np.float64),
+        }
+        reward = terms["time"] + terms["approach"] + terms["success"]
+        self.steps += 1
+        self.returns += reward
+        self.unstable_count += int(unstable.sum())
+        return Step(
+            observation=self.observation.copy(),
+            reward=reward,
+            terms=terms,
+            terminated=success,
+            truncated=unstable | (self.steps >= self.task.t_max),
+            success=success,
+            unstable=unstable,
+            episode_return=self.returns.copy(),
+            episode_length=self.steps.copy(),
+        )
+
+    # ---- internals -----------------------------------------------------------------------
+    def _count_warnings(self) -> None:
+        """Tally MuJoCo warnings raised in any arena since the last step, then clear them."""
+        for counts in self.warning_counts:
+            if counts.any():
+                self.warning_count += int(counts.sum())
+                counts[:] = 0
+
+    def _observe(self) -> tuple[npt.NDArray[np.float32], F64]:
+        """Observation and task distance d of every arena from the current sensors."""
+        s, n = self.sensordata, self.num_envs
+        modules = s[:, self.i_modules].reshape(n, self.n_modules, 3)
+        gap = self.target[:, None, :2] - modules[:, :, :2]
+        distance = np.sqrt((gap**2).sum(axis=2)).min(axis=1)
+        to_target = self.target[:, :2] - s[:, self.i_origin][:, :2]
+        to_target /= np.maximum(np.linalg.norm(to_target, axis=1, keepdims=True), 1e-9)
+        heading = s[:, self.i_xaxis][:, :2]
+        norm = np.linalg.norm(heading, axis=1, keepdims=True)
+        heading = np.where(norm > 1e-6, heading / np.maximum(norm, 1e-12), [1.0, 0.0])
+        direction = np.stack(
+            [
+                (heading * to_target).sum(axis=1),
+                heading[:, 0] * to_target[:, 1] - heading[:, 1] * to_target[:, 0],
+            ],
+            axis=1,
+        )
+        n_motors = len(self.i_speed)
+        motors = np.stack(
+            [s[:, self.i_speed] / self.physics.motor_max_speed, self.action[:, :n_motors]], axis=2
+        ).reshape(n, -1)
+        pivots = np.stack(
+            [s[:, self.i_angle] / self.pivot_limit, self.action[:, n_motors:]], axis=2
+        ).reshape(n, -1)
+        parts = [s[:, self.i_linvel], s[:, self.i_angvel], direction, distance[:, None], motors, pivots]
+        if self.task.observe_up:
+            x, z = s[:, self.i_xaxis], s[:, self.i_zaxis]
+            y = np.cross(z, x)
+            parts.append(-np.stack([x[:, 2], y[:, 2], z[:, 2]], axis=1))
+        return np.concatenate(parts, axis=1).astype(np.float32), distance
+
+    def poses(self, arena: int) -> tuple[F64, F64]:
+        """World positions (nbody, 3) and quaternions (nbody, 4; w, x, y, z) of every body
+        in ``arena``'s current state, target marker included (for recording and replay)."""
+        m, d = self.model, self.scratch
+        mujoco.mj_setState(m, d, self.state[arena], _FULL)
+        d.mocap_pos[self.target_mocap] = self.target[arena]
+        mujoco.mj_kinematics(m, d)
+        return d.xpos.copy(), d.xquat.copy()
