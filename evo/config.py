@@ -24,6 +24,8 @@ class ConfigError(ValueError):
 
 def _coerce(value: Any, hint: Any, key: str) -> Any:
     """Turn a plain config value into the type a dataclass field declares."""
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return typed(hint, value, key)
     origin = typing.get_origin(hint)
     if origin is tuple:
         if not isinstance(value, list | tuple):

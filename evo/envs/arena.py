@@ -132,29 +132,53 @@ def arena_scene(params: ArenaParams, target_radius: float) -> ET.Element:
     world = ET.Element("worldbody")
     half = params.side / 2
     ET.SubElement(
-        world, "geom", name="floor", type="plane", size=_fmt([half + 0.5, half + 0.5, 0.1]),
+        world,
+        "geom",
+        name="floor",
+        type="plane",
+        size=_fmt([half + 0.5, half + 0.5, 0.1]),
         material="grid",
     )
     t, h = params.wall_thickness, params.wall_height
     for i, (x, y, sx, sy) in enumerate(
-        [(half + t / 2, 0, t / 2, half + t), (-half - t / 2, 0, t / 2, half + t),
-         (0, half + t / 2, half + t, t / 2), (0, -half - t / 2, half + t, t / 2)]
+        [
+            (half + t / 2, 0, t / 2, half + t),
+            (-half - t / 2, 0, t / 2, half + t),
+            (0, half + t / 2, half + t, t / 2),
+            (0, -half - t / 2, half + t, t / 2),
+        ]
     ):
         ET.SubElement(
-            world, "geom", name=f"wall{i}", type="box", pos=_fmt([x, y, h / 2]),
-            size=_fmt([sx, sy, h / 2]), rgba=".55 .5 .45 1",
+            world,
+            "geom",
+            name=f"wall{i}",
+            type="box",
+            pos=_fmt([x, y, h / 2]),
+            size=_fmt([sx, sy, h / 2]),
+            rgba=".55 .5 .45 1",
         )
     for i, rock in enumerate(params.rocks):
         body = ET.SubElement(world, "body", name=f"rock{i}", pos=_fmt([0, 0, rock.half_height]))
         ET.SubElement(body, "freejoint", name=f"rock{i}")
         ET.SubElement(
-            body, "geom", name=f"rock{i}", type=rock.shape, size=_fmt(rock.size),
-            density=f"{params.rock_density:.6g}", rgba=".5 .42 .35 1",
+            body,
+            "geom",
+            name=f"rock{i}",
+            type=rock.shape,
+            size=_fmt(rock.size),
+            density=f"{params.rock_density:.6g}",
+            rgba=".5 .42 .35 1",
         )
     target = ET.SubElement(world, "body", name="target", mocap="true", pos="1 0 0")
     ET.SubElement(
-        target, "geom", name="target", type="cylinder", size=_fmt([target_radius, 0.001]),
-        contype="0", conaffinity="0", rgba=".9 .15 .15 .6",
+        target,
+        "geom",
+        name="target",
+        type="cylinder",
+        size=_fmt([target_radius, 0.001]),
+        contype="0",
+        conaffinity="0",
+        rgba=".9 .15 .15 .6",
     )
     return world
 
@@ -208,9 +232,7 @@ def _draw_near(
     )
 
 
-def sample_target(
-    rng: np.random.Generator, r_min: float, r_max: float
-) -> npt.NDArray[np.float64]:
+def sample_target(rng: np.random.Generator, r_min: float, r_max: float) -> npt.NDArray[np.float64]:
     """A target uniform in area over the annulus ``r_min <= r <= r_max`` (z = 0)."""
     r = math.sqrt(rng.uniform(r_min**2, r_max**2))
     a = rng.uniform(0, 2 * math.pi)

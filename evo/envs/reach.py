@@ -23,7 +23,7 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from evo.envs.arena import ArenaParams
-from evo.envs.task import REWARD_TERMS, ReachCore, TaskParams
+from evo.envs.task import REWARD_TERMS, EnvConfig, ReachCore, TaskParams
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -87,7 +87,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: object) -> TensorDict:
         mask = None
-        if tensordict is not None and "_reset" in tensordict.keys():
+        if tensordict is not None and "_reset" in tensordict:
             mask = tensordict.get("_reset").reshape(-1).numpy()
         observation = self.core.reset(mask)
         n = self.num_envs
@@ -133,3 +133,10 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
 
     def _set_seed(self, seed: int | None) -> None:
         self.core.seed(seed)
+
+
+def make_env(
+    robot: Robot, physics: PhysicsParams, env: EnvConfig, num_envs: int, seed: int | None
+) -> ReachEnv:
+    """A ``ReachEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes."""
+    return ReachEnv(robot, physics, env.arena, env.task, num_envs, env.nthread, seed)

@@ -77,7 +77,9 @@ class TaskParams:
 
     def __post_init__(self) -> None:
         if self.t_max < 1 or self.frame_skip < 1:
-            raise ValueError(f"t_max and frame_skip must be >= 1, got {self.t_max}, {self.frame_skip}")
+            raise ValueError(
+                f"t_max and frame_skip must be >= 1, got {self.t_max}, {self.frame_skip}"
+            )
         if self.success_radius <= 0:
             raise ValueError(f"success_radius must be positive, got {self.success_radius}")
         if not 0 <= self.target_min <= self.target_max:
@@ -249,8 +251,14 @@ class ReachCore:
         act = np.clip(np.asarray(action, dtype=np.float64).reshape(self.num_envs, -1), -1, 1)
         self.ctrl[:] = (act * self.ctrl_scale)[:, None, :]
         self.rollout.rollout(
-            self.models, self.datas, self.state, self.ctrl, nstep=self.task.frame_skip,
-            initial_warmstart=self.warmstart, state=self.state_out, sensordata=self.sensor_out,
+            self.models,
+            self.datas,
+            self.state,
+            self.ctrl,
+            nstep=self.task.frame_skip,
+            initial_warmstart=self.warmstart,
+            state=self.state_out,
+            sensordata=self.sensor_out,
             skip_checks=True,
         )
         self._count_warnings()
@@ -322,7 +330,14 @@ class ReachCore:
         pivots = np.stack(
             [s[:, self.i_angle] / self.pivot_limit, self.action[:, n_motors:]], axis=2
         ).reshape(n, -1)
-        parts = [s[:, self.i_linvel], s[:, self.i_angvel], direction, distance[:, None], motors, pivots]
+        parts = [
+            s[:, self.i_linvel],
+            s[:, self.i_angvel],
+            direction,
+            distance[:, None],
+            motors,
+            pivots,
+        ]
         if self.task.observe_up:
             x, z = s[:, self.i_xaxis], s[:, self.i_zaxis]
             y = np.cross(z, x)
@@ -337,3 +352,24 @@ class ReachCore:
         d.mocap_pos[self.target_mocap] = self.target[arena]
         mujoco.mj_kinematics(m, d)
         return d.xpos.copy(), d.xquat.copy()
+
+
+@dataclass(frozen=True, slots=True)
+class EnvConfig:
+    """One ``conf/env/*.yaml``: which arena, the task, and how many threads step it.
+
+    Attributes:
+        name: Label of the arena (clean, cluttered).
+        nthread: Threads MuJoCo uses to step one evaluation's arenas.
+        arena: The arena.
+        task: The task.
+    """
+
+    name: str = "clean"
+    nthread: int = 1
+    arena: ArenaParams = ArenaParams()
+    task: TaskParams = TaskParams()
+
+    def __post_init__(self) -> None:
+        if self.nthread < 1:
+            raise ValueError(f"nthread must be >= 1, got {self.nthread}")

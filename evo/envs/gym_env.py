@@ -1,0 +1,120 @@
+"""``ReachGymEnv``: the reach task as a single-arena ``gymnasium.Env`` (``evo/Reach-v0``).
+
+For users of gymnasium-based libraries (Stable-Baselines3, CleanRL, ...). It runs the
+same task code as the batched TorchRL ``ReachEnv`` (``evo.envs.task.ReachCore`` with one
+arena), so observations, rewards and termination are identical::
+
+    import gymnasium as gym
+    import evo.envs  # registers evo/Reach-v0
+
+    env = gym.make("evo/Reach-v0", robot="robots/four_wheeler.json", arena="cluttered")
+
+(or, without the import, ``gym.make("evo.envs:evo/Reach-v0", ...)``). The env truncates
+its own episodes after ``t_max`` control steps; ``info`` carries every reward term
+(``reward/<name>``), ``success`` and ``unstable``.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import numpy.typing as npt
+
+from evo.envs.arena import ArenaParams
+from evo.envs.task import ReachCore, TaskParams
+from evo.robot.builder import PhysicsParams
+from evo.robot.io import load_robot
+from evo.robot.tree import Robot
+
+Obs = npt.NDArray[np.float32]
+
+
+def arena_params(arena: str | ArenaParams) -> ArenaParams:
+    """``ArenaParams`` from a preset name (``clean``, ``cluttered``) or as given."""
+    if isinstance(arena, ArenaParams):
+        return arena
+    presets = {"clean": ArenaParams.clean, "cluttered": ArenaParams.cluttered}
+    if arena not in presets:
+        raise ValueError(f"arena must be one of {sorted(presets)} or ArenaParams, got {arena!r}")
+    return presets[arena]()
+
+
+class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
+    """One arena of the reach task.
+
+    Args:
+        robot: A robot, or the path of an ``evo.robot/1`` file.
+        arena: ``"clean"``, ``"cluttered"`` or ``ArenaParams``.
+        physics: Module constants (defaults when None).
+        task: Task constants (defaults when None).
+        render_mode: ``"rgb_array"`` for pictures from ``render()``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+
+    def __init__(
+        self,
+        robot: Robot | str | os.PathLike[str],
+        arena: str | ArenaParams = "clean",
+        physics: PhysicsParams | None = None,
+        task: TaskParams | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
+        if not isinstance(robot, Robot):
+            robot = load_robot(robot)
+        self.core = ReachCore(robot, physics, arena_params(arena), task, num_envs=1)
+        size = self.core.obs_size
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.core.action_size,), np.float32)
+        self.render_mode = render_mode
+        self._renderer: mujoco.Renderer | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Obs, dict[str, Any]]:
+        super().reset(seed=seed)
+        if seed is not None:
+            self.core.seed(seed)
+        observation = self.core.reset()[0]
+        return observation, {"target": self.core.target[0].copy()}
+
+    def step(self, action: npt.ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
+        step = self.core.step(np.asarray(action, dtype=np.float64)[None])
+        info: dict[str, Any] = {f"reward/{k}": float(v[0]) for k, v in step.terms.items()}
+        info["success"] = bool(step.success[0])
+        info["unstable"] = bool(step.unstable[0])
+        return (
+            step.observation[0],
+            float(step.reward[0]),
+            bool(step.terminated[0]),
+            bool(step.truncated[0]),
+            info,
+        )
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from evo.robot.render import make_renderer
+
+        if self._renderer is None:
+            self._renderer = make_renderer(self.core.model, 480, 360)
+        self.core.poses(0)  # puts arena 0's state into the scratch data
+        data = self.core.scratch
+        camera = mujoco.MjvCamera()
+        camera.lookat[:] = (data.body("brain").xpos + self.core.target[0]) / 2
+        camera.distance = 1.2 + float(np.linalg.norm(self.core.target[0, :2]))
+        camera.azimuth, camera.elevation = 135.0, -45.0
+        self._renderer.update_scene(data, camera=camera)
+        image: npt.NDArray[np.uint8] = self._renderer.render().copy()
+        return image
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
