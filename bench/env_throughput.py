@@ -47,8 +47,15 @@ def raw_rate(env: ReachEnv, steps: int, rng: np.random.Generator) -> float:
     for t in range(steps):
         ctrl[:] = controls[t]
         rollout.rollout(
-            core.models, datas, state, ctrl, nstep=k, initial_warmstart=warm,
-            state=out_state, sensordata=out_sensors, skip_checks=True,
+            core.models,
+            datas,
+            state,
+            ctrl,
+            nstep=k,
+            initial_warmstart=warm,
+            state=out_state,
+            sensordata=out_sensors,
+            skip_checks=True,
         )
         state[:] = out_state[:, -1]
     elapsed = time.perf_counter() - start
@@ -96,8 +103,13 @@ def main() -> None:
                         raw = max(raw, raw_rate(env, steps, rng))
                         fast = max(fast, env_rate(env, steps))
                     table.add_row(
-                        path.split("/")[-1].removesuffix(".json"), arena_name, str(n),
-                        str(nthread), f"{raw:,.0f}", f"{fast:,.0f}", f"{fast / raw:.2f}",
+                        path.split("/")[-1].removesuffix(".json"),
+                        arena_name,
+                        str(n),
+                        str(nthread),
+                        f"{raw:,.0f}",
+                        f"{fast:,.0f}",
+                        f"{fast / raw:.2f}",
                     )
                     env.close()
     Console().print(table)

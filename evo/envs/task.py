@@ -213,6 +213,17 @@ class ReachCore:
         """Length of one action, m + n."""
         return int(self.model.nu)
 
+    @property
+    def qpos(self) -> F64:
+        """Joint positions of every arena, (N, nq): a view into the state (time, qpos, qvel...)."""
+        return self.state[:, 1 : 1 + self.model.nq]
+
+    @property
+    def qvel(self) -> F64:
+        """Joint velocities of every arena, (N, nv): a view into the state."""
+        nq = self.model.nq
+        return self.state[:, 1 + nq : 1 + nq + self.model.nv]
+
     def seed(self, seed: int | None) -> None:
         """Re-seed the random targets and rocks."""
         self.rng = np.random.default_rng(seed)
@@ -244,6 +255,18 @@ class ReachCore:
         observation, distance = self._observe()
         self.observation[chosen] = observation[chosen]
         self.distance[chosen] = distance[chosen]
+        return self.observation.copy()
+
+    def set_target(self, arena: int, position: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """Move ``arena``'s target (x, y in m) for the rest of its episode (rocks stay).
+
+        Returns:
+            The observation of every arena.
+        """
+        self.target[arena, :2] = np.asarray(position, dtype=np.float64)[:2]
+        observation, distance = self._observe()
+        self.observation[arena] = observation[arena]
+        self.distance[arena] = distance[arena]
         return self.observation.copy()
 
     def step(self, action: npt.ArrayLike) -> Step:

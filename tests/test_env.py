@@ -1,0 +1,238 @@
+"""The reach task, its batched TorchRL face and its gymnasium face."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+from torchrl.envs.utils import check_env_specs
+
+import evo.envs
+from evo.envs.arena import ArenaParams
+from evo.envs.reach import ReachEnv
+from evo.envs.task import REWARD_TERMS, ReachCore, TaskParams
+from evo.robot import Robot, load_robot
+
+EXAMPLES = ["four_wheeler", "inchworm", "snake", "twisted_four_wheeler"]
+
+
+def robot(name: str = "four_wheeler") -> Robot:
+    return load_robot(f"robots/{name}.json")
+
+
+def forward(core: ReachCore, sign: float = 1.0) -> np.ndarray:
+    """All motors at ``sign``, pivots held straight."""
+    action = np.zeros((core.num_envs, core.action_size))
+    action[:, : len(core.built.motors)] = sign
+    return action
+
+
+@pytest.mark.parametrize("name", EXAMPLES)
+def test_sizes_follow_the_robot(name: str) -> None:
+    r = robot(name)
+    core = ReachCore(r, num_envs=3, seed=0)
+    m, n = r.n_motors, r.n_pivots
+    assert core.reset().shape == (3, 9 + 2 * (m + n))
+    assert core.action_size == m + n == core.model.nu
+    up = ReachCore(r, task=TaskParams(observe_up=True), num_envs=2, seed=0)
+    obs = up.reset()
+    assert obs.shape == (2, 12 + 2 * (m + n))
+    # At rest, upright: gravity points down the brain's -z.
+    np.testing.assert_allclose(obs[:, -3:], [[0, 0, -1]] * 2, atol=1e-6)
+
+
+def test_state_layout_is_time_qpos_qvel() -> None:
+    core = ReachCore(robot(), arena=ArenaParams.cluttered(), num_envs=2, seed=1)
+    core.reset()
+    data = mujoco.MjData(core.model)
+    mujoco.mj_setState(core.model, data, core.state[1], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    np.testing.assert_array_equal(core.qpos[1], data.qpos)
+    np.testing.assert_array_equal(core.qvel[1], data.qvel)
+
+
+def test_observation_reports_direction_and_distance_to_target() -> None:
+    core = ReachCore(robot(), num_envs=2, seed=0)
+    core.reset()
+    obs = core.set_target(0, [0.0, 1.0])  # to the robot's left (brain +y)
+    obs = core.set_target(1, [1.0, 0.0])  # straight ahead
+    np.testing.assert_allclose(obs[0, 6:8], [0, 1], atol=1e-3)
+    np.testing.assert_allclose(obs[1, 6:8], [1, 0], atol=1e-3)
+    modules = core.sensordata[1, core.i_modules].reshape(-1, 3)
+    expected = np.hypot(1.0 - modules[:, 0], modules[:, 1]).min()
+    assert obs[1, 8] == pytest.approx(expected, rel=1e-5)
+
+
+def test_approach_reward_is_positive_when_closing_in_and_terms_sum_to_reward() -> None:
+    core = ReachCore(robot(), num_envs=2, seed=0)
+    core.reset()
+    for arena in (0, 1):
+        core.set_target(arena, [1.2, 0.0])
+    action = np.concatenate([forward(core, 1.0)[:1], forward(core, -1.0)[:1]])
+    approach = np.zeros(2)
+    for _ in range(40):
+        step = core.step(action)
+        total = sum(step.terms[name] for name in REWARD_TERMS)
+        np.testing.assert_allclose(step.reward, total)
+        np.testing.assert_allclose(step.terms["time"], -1 / core.task.t_max)
+        approach += step.terms["approach"]
+    assert approach[0] > 0.01, f"driving at the target earned {approach[0]}"
+    assert approach[1] < -0.01, f"driving away earned {approach[1]}"
+
+
+def test_success_terminates_with_bonus() -> None:
+    core = ReachCore(robot(), num_envs=1, seed=0)
+    core.reset()
+    core.set_target(0, [0.35, 0.0])
+    steps = 0
+    while steps < 200:
+        step = core.step(forward(core))
+        steps += 1
+        if step.terminated[0]:
+            break
+    assert step.terminated[0] and step.success[0] and not step.truncated[0], "no success"
+    assert step.terms["success"][0] == 1.0
+    assert step.observation[0, 8] < core.task.success_radius
+    assert step.episode_length[0] == steps
+
+
+def test_truncation_at_t_max_and_episode_return() -> None:
+    core = ReachCore(robot(), task=TaskParams(t_max=25), num_envs=3, seed=0)
+    core.reset()
+    rewards = []
+    for _ in range(25):
+        step = core.step(np.zeros((3, core.action_size)))
+        rewards.append(step.reward)
+        assert not step.terminated.any()
+    assert step.truncated.all() and (step.episode_length == 25).all()
+    np.testing.assert_allclose(step.episode_return, np.sum(rewards, axis=0))
+
+
+def test_same_seed_same_trajectory_different_seed_different_target() -> None:
+    def run(seed: int, nthread: int) -> tuple[np.ndarray, np.ndarray]:
+        core = ReachCore(
+            robot("inchworm"), arena=ArenaParams.cluttered(), num_envs=4, nthread=nthread,
+            seed=seed,
+        )
+        core.reset()
+        rng = np.random.default_rng(7)
+        for _ in range(30):
+            step = core.step(rng.uniform(-1, 1, (4, core.action_size)))
+        return core.target.copy(), np.concatenate([step.observation, core.state], axis=1)
+
+    target_a, final_a = run(3, 1)
+    target_b, final_b = run(3, 2)
+    target_c, _ = run(4, 1)
+    np.testing.assert_array_equal(target_a, target_b)
+    np.testing.assert_array_equal(final_a, final_b)  # threads do not change the physics
+    assert not np.allclose(target_a, target_c)
+
+
+def test_targets_fill_the_annulus() -> None:
+    core = ReachCore(robot(), num_envs=200, seed=0)
+    core.reset()
+    r = np.hypot(core.target[:, 0], core.target[:, 1])
+    assert r.min() >= 0.5 and r.max() <= 1.5
+    assert r.min() < 0.6 and r.max() > 1.4
+    angles = np.arctan2(core.target[:, 1], core.target[:, 0])
+    assert np.histogram(angles, bins=4, range=(-math.pi, math.pi))[0].min() > 25
+
+
+def test_rocks_lie_around_the_target_clear_of_the_start_and_move_when_pushed() -> None:
+    arena = ArenaParams.cluttered()
+    core = ReachCore(robot(), arena=arena, num_envs=6, seed=2)
+    core.reset()
+    rock_xyz = core.qpos[:, core.rock_qpos[:, None] + np.arange(3)]  # (N, rocks, 3)
+    to_target = np.linalg.norm(rock_xyz[..., :2] - core.target[:, None, :2], axis=2)
+    assert to_target.max() <= arena.rock_spread + 1e-9
+    assert to_target.min() >= arena.target_clearance
+    assert np.linalg.norm(rock_xyz[..., :2], axis=2).min() >= arena.start_clearance
+    assert len({tuple(np.round(t, 6)) for t in core.target}) == 6
+
+    # Drive straight at a target beyond a rock field: rocks in the way get pushed.
+    core.set_target(0, [1.0, 0.0])
+    core.qpos[0, core.rock_qpos[0] + np.arange(3)] = [0.45, 0.0, arena.rocks[0].half_height]
+    before = core.qpos[0, core.rock_qpos[0] + np.arange(2)].copy()
+    for _ in range(60):
+        core.step(forward(core))
+    moved = np.linalg.norm(core.qpos[0, core.rock_qpos[0] + np.arange(2)] - before)
+    assert moved > 0.02, f"the rock in the robot's path moved only {moved:.4f} m"
+
+
+def test_injected_nan_ends_only_that_arena_flagged() -> None:
+    env = ReachEnv(robot(), num_envs=4, seed=0)
+    td = env.reset()
+    env.core.qvel[2, 0] = np.nan
+    td["action"] = torch.zeros(4, env.core.action_size)
+    td = env.step(td)["next"]
+    assert td["unstable"].squeeze(-1).tolist() == [False, False, True, False]
+    assert td["truncated"].squeeze(-1).tolist() == [False, False, True, False]
+    assert torch.isfinite(td["observation"]).all()
+    assert env.core.unstable_count == 1
+    td["_reset"] = td["done"].clone()
+    td = env.reset(td)
+    assert np.isfinite(env.core.state).all()
+    assert env.core.steps.tolist() == [1, 1, 0, 1]
+
+
+def test_partial_reset_touches_only_masked_arenas() -> None:
+    env = ReachEnv(robot(), num_envs=3, seed=0)
+    td = env.reset()
+    td["action"] = torch.zeros(3, env.core.action_size)
+    for _ in range(5):
+        td = env.step(td)["next"]
+        td["action"] = torch.zeros(3, env.core.action_size)
+    targets, steps = env.core.target.copy(), env.core.steps.copy()
+    td["_reset"] = torch.tensor([[False], [True], [False]])
+    env.reset(td)
+    assert (env.core.steps == [steps[0], 0, steps[2]]).all()
+    np.testing.assert_array_equal(env.core.target[[0, 2]], targets[[0, 2]])
+    assert not np.array_equal(env.core.target[1], targets[1])
+
+
+@pytest.mark.parametrize("arena", ["clean", "cluttered"])
+def test_torchrl_env_passes_check_env_specs(arena: str) -> None:
+    env = ReachEnv(robot("snake"), arena=getattr(ArenaParams, arena)(), num_envs=5, seed=0)
+    check_env_specs(env, seed=0)
+    rollout = env.rollout(12, break_when_any_done=False)
+    assert rollout.batch_size == torch.Size([5, 12])
+    terms = sum(rollout["next", "reward_terms", name] for name in REWARD_TERMS)
+    torch.testing.assert_close(terms, rollout["next", "reward"])
+
+
+def test_gymnasium_env_registered_and_passes_check_env() -> None:
+    assert evo.envs.ENV_ID == "evo/Reach-v0"
+    env = gym.make("evo/Reach-v0", robot="robots/four_wheeler.json", arena="cluttered")
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=5)
+    assert obs.shape == (15,) and env.action_space.shape == (3,)
+    obs2, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(obs, obs2)
+    _, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert reward == pytest.approx(sum(info[f"reward/{t}"] for t in REWARD_TERMS))
+    assert not (terminated or truncated)
+
+
+def test_gymnasium_and_torchrl_faces_agree() -> None:
+    env = gym.make("evo/Reach-v0", robot=robot("inchworm")).unwrapped
+    batched = ReachEnv(robot("inchworm"), num_envs=1, seed=11)
+    obs, _ = env.reset(seed=11)
+    td = batched.reset()
+    np.testing.assert_array_equal(obs, td["observation"][0].numpy())
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        action = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        obs, reward, *_ = env.step(action)
+        td["action"] = torch.from_numpy(action)[None]
+        td = batched.step(td)["next"]
+        np.testing.assert_array_equal(obs, td["observation"][0].numpy())
+        assert reward == pytest.approx(float(td["reward"][0]), rel=1e-6)
+
+
+def test_bad_arena_name_is_named() -> None:
+    with pytest.raises(ValueError, match="arena must be one of"):
+        gym.make("evo/Reach-v0", robot="robots/four_wheeler.json", arena="muddy")
