@@ -61,7 +61,8 @@ class InvalidRobotError(ValueError):
         self.violations = violations
         self.source = source
         lines = "\n".join(f"  - {v}" for v in violations)
-        super().__init__(f"{source} is not a valid robot ({len(violations)} problems):\n{lines}")
+        count = f"{len(violations)} problem{'' if len(violations) == 1 else 's'}"
+        super().__init__(f"{source} is not a valid robot ({count}):\n{lines}")
 
 
 def _wheel_faces(node: Node) -> list[int]:
