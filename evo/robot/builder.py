@@ -37,6 +37,18 @@ from evo.robot.tree import (
 FloatArray = npt.NDArray[np.float64]
 
 
+WHEEL_AXIS_SKEW = 1e-6
+"""Angle (rad) by which a wheel's cylinder axis is tilted off its axle.
+
+MuJoCo's plane-cylinder test treats a cylinder as tilted as soon as its axis is more than
+about 1e-15 off the plane normal, and then aims the rim point along the leftover vector.
+Rounding in the composed lattice rotations leaves a wheel whose axle is vertical in the
+rest pose (lying flat) a few 1e-16 off, so the rim point aims along noise and the wheel
+reports a phantom 2-3 cm penetration that launches the robot at the start of an
+episode. This tilt (3e-8 m at the rim) keeps the axis clear of that degenerate case.
+"""
+
+
 @dataclass(frozen=True, slots=True)
 class PhysicsParams:
     """Physical constants of the modules (SI units throughout).
@@ -189,7 +201,11 @@ def _lowest_point(placed: list[Placed], p: PhysicsParams) -> float:
             reach += p.wheel_width / 2 * abs(axis[2])
             lowest = min(lowest, centre[2] - reach)
         else:
-            lowest = min(lowest, m.cell[2] * s - s / 2)
+            # The collision boxes leave a gap between cubes; a pivot's two half boxes
+            # reach a little further along its own x than across it.
+            along_x = m.node.type is ModuleType.PIVOT and abs(int(m.frame[2, 0])) == 1
+            half = s / 2 - p.module_gap / (4 if along_x else 2)
+            lowest = min(lowest, m.cell[2] * s - half)
     return lowest
 
 
@@ -267,7 +283,7 @@ class _Builder:
                 "geom",
                 name=name,
                 type="cylinder",
-                zaxis="1 0 0",
+                zaxis=f"1 {WHEEL_AXIS_SKEW:.6g} 0",
                 size=f"{p.wheel_radius:.6g} {p.wheel_width / 2:.6g}",
                 mass=f"{p.wheel_mass:.6g}",
                 material="wheel",
