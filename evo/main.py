@@ -1,39 +1,114 @@
 """evo's entry point: ``python evo/main.py +exp=<name> [key=value ...]``.
 
 This is the config edge (STYLE rule 1): the Hydra config is turned into typed objects
-here and nothing below sees a ``DictConfig``. Outputs go only to Hydra's run directory.
+here and nothing below sees a ``DictConfig``. Outputs go only to the run directory
+(Hydra's output dir, chosen with ``hydra.run.dir=...``).
+
+Tasks (``task=``):
+
+* ``robots``: generate, save and picture random robots;
+* ``train``: train one robot (``robot=FILE``) and evaluate it deterministically;
+* ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``).
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import hydra
 import numpy as np
+import torch
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from evo.config import ConfigError, typed
-from evo.robot import GeneratorParams, Limits, random_robot
+from evo.envs.task import EnvConfig
+from evo.learners.common import LearnerConfig
+from evo.robot import (
+    GeneratorParams,
+    InvalidRobotError,
+    Limits,
+    Robot,
+    RobotFileError,
+    load_robot,
+    random_robot,
+)
 from evo.robot.builder import PhysicsParams
-from evo.robot.gallery import write_gallery
+
+
+def _robot(cfg: DictConfig) -> Robot:
+    """The robot named by ``robot=``; a missing key or bad file is a ``ConfigError``."""
+    if cfg.robot is None:
+        raise ConfigError("robot: give the robot to use, e.g. robot=robots/four_wheeler.json")
+    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
+    try:
+        return load_robot(str(cfg.robot), limits)
+    except (RobotFileError, InvalidRobotError) as err:
+        raise ConfigError(f"robot: {err}") from None
+
+
+def _physics(cfg: DictConfig) -> PhysicsParams:
+    return typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
 
 
 def run_robots(cfg: DictConfig, out: Path) -> None:
     """Generate, save and picture ``robots.count`` random robots."""
-    params = typed(GeneratorParams, cfg.robot.generator, "robot.generator")
-    limits = typed(Limits, cfg.robot.limits, "robot.limits")
-    physics = typed(PhysicsParams, cfg.robot.physics, "robot.physics")
+    from evo.robot.gallery import write_gallery
+
+    params = typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
+    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
     count = int(cfg.robots.count)
     if count < 1:
         raise ConfigError(f"robots.count: expected a positive integer, got {count}")
     rng = np.random.default_rng(int(cfg.seed))
     robots = [random_robot(rng, params, limits) for _ in range(count)]
-    write_gallery(robots, out / "robots", physics, bool(cfg.robots.render))
+    write_gallery(robots, out / "robots", _physics(cfg), bool(cfg.robots.render))
 
 
-TASKS = {"robots": run_robots}
+def run_train(cfg: DictConfig, out: Path) -> None:
+    """Train one robot and evaluate it (``+exp=train``)."""
+    from evo.learners.session import train_robot
+
+    train_robot(
+        _robot(cfg),
+        physics=_physics(cfg),
+        env=typed(EnvConfig, cfg.env, "env"),
+        learner=typed(LearnerConfig, cfg.learner, "learner"),
+        seed=int(cfg.seed),
+        out=out,
+    )
+
+
+def run_evaluate(cfg: DictConfig, out: Path) -> None:
+    """Evaluate a trained policy deterministically (``+exp=evaluate``)."""
+    from evo.learners.session import evaluate_robot
+
+    if cfg.checkpoint is None:
+        raise ConfigError(
+            "checkpoint: give the policy to run, e.g. checkpoint=outputs/.../policy.pt"
+        )
+    learner = typed(LearnerConfig, cfg.learner, "learner")
+    try:
+        evaluate_robot(
+            _robot(cfg),
+            Path(str(cfg.checkpoint)),
+            physics=_physics(cfg),
+            env=typed(EnvConfig, cfg.env, "env"),
+            episodes=learner.eval_episodes,
+            seed=int(cfg.seed),
+            out=out,
+        )
+    except ValueError as err:
+        raise ConfigError(f"checkpoint: {err}") from None
+
+
+TASKS: dict[str, Callable[[DictConfig, Path], None]] = {
+    "robots": run_robots,
+    "train": run_train,
+    "evaluate": run_evaluate,
+}
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
@@ -44,6 +119,11 @@ def main(cfg: DictConfig) -> None:
         task = TASKS.get(str(cfg.task))
         if task is None:
             raise ConfigError(f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
+        threads = cfg.torch_threads
+        if not isinstance(threads, int) or threads < 1:
+            raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
+        torch.set_num_threads(threads)
+        (out / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
         task(cfg, out)
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)

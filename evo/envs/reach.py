@@ -16,6 +16,8 @@ whose episodes ended.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -61,6 +63,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
     ) -> None:
         super().__init__(batch_size=torch.Size([num_envs]), device="cpu")
         self.core = ReachCore(robot, physics, arena, task, num_envs, nthread, seed)
+        self.step_seconds = 0.0  # wall time inside _step, physics included
         n = num_envs
         self.observation_spec = Composite(
             observation=Unbounded((n, self.core.obs_size), dtype=torch.float32),
@@ -111,9 +114,10 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
         )
 
     def _step(self, tensordict: TensorDictBase) -> TensorDict:
+        tick = time.perf_counter()
         step = self.core.step(tensordict.get("action").numpy())
         n = self.num_envs
-        return TensorDict(
+        out = TensorDict(
             {
                 "observation": torch.from_numpy(step.observation),
                 "reward": _column(step.reward),
@@ -130,6 +134,8 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
             },
             batch_size=(n,),
         )
+        self.step_seconds += time.perf_counter() - tick
+        return out
 
     def _set_seed(self, seed: int | None) -> None:
         self.core.seed(seed)

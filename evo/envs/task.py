@@ -36,6 +36,7 @@ observation is held at the last good one and its step earns only the time penalt
 from __future__ import annotations
 
 import math
+import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
@@ -154,6 +155,7 @@ class ReachCore:
         self._allocate()
         self.unstable_count = 0
         self.warning_count = 0
+        self.physics_seconds = 0.0
 
     # ---- set-up -------------------------------------------------------------------------
     def _index_model(self) -> None:
@@ -273,6 +275,7 @@ class ReachCore:
         """Advance every arena one control step with ``action`` of shape (N, m + n)."""
         act = np.clip(np.asarray(action, dtype=np.float64).reshape(self.num_envs, -1), -1, 1)
         self.ctrl[:] = (act * self.ctrl_scale)[:, None, :]
+        tick = time.perf_counter()
         self.rollout.rollout(
             self.models,
             self.datas,
@@ -284,6 +287,7 @@ class ReachCore:
             sensordata=self.sensor_out,
             skip_checks=True,
         )
+        self.physics_seconds += time.perf_counter() - tick
         self._count_warnings()
         dt = self.model.opt.timestep * self.task.frame_skip
         new_state, new_sensors = self.state_out[:, -1], self.sensor_out[:, -1]

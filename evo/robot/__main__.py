@@ -4,8 +4,8 @@ Verbs and exit codes (scripts rely on them):
 
 * ``validate FILE...``: 0 when every file is valid; 1 when any is invalid (every
   violation printed with its node path); 2 when any file cannot be read or parsed.
-* ``random --count N --seed S --out DIR [--max-depth D]``: N valid robots as JSON,
-  identical for the same seed.
+* ``random --count N --seed S --out DIR [--max-depth D]``: N distinct valid robots as
+  JSON, identical for the same seed.
 * ``crossover A.json B.json --seed S --out DIR``: the valid offspring of one crossover.
 * ``mutate FILE --seed S --out DIR``: one mutated robot (mutation is an extension).
 * ``info FILE``: module counts, m, n, observation and action sizes, hash.
@@ -20,13 +20,13 @@ robot), never with a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from evo.robot.builder import build
 from evo.robot.io import RobotFileError, load_robot, save_robot
 from evo.robot.operators import GeneratorParams, OperatorError, crossover, mutate, random_robot
 from evo.robot.tree import ModuleType, Robot
@@ -44,7 +44,8 @@ def _validate(args: argparse.Namespace) -> int:
             print(f"{err.source}: unreadable: {err.reason}", file=sys.stderr)
             worst = max(worst, EXIT_UNREADABLE)
         except InvalidRobotError as err:
-            print(f"{err.source}: invalid ({len(err.violations)} problems)", file=sys.stderr)
+            n = len(err.violations)
+            print(f"{err.source}: invalid ({n} problem{'' if n == 1 else 's'})", file=sys.stderr)
             for v in err.violations:
                 print(f"  {v}", file=sys.stderr)
             worst = max(worst, EXIT_INVALID)
@@ -62,7 +63,20 @@ def _write(robots: Sequence[Robot], out: Path) -> None:
 def _random(args: argparse.Namespace) -> int:
     params = GeneratorParams(max_depth=args.max_depth, p_empty=args.p_empty)
     rng = np.random.default_rng(args.seed)
-    _write([random_robot(rng, params) for _ in range(args.count)], Path(args.out))
+    # Files are named by hash, so a robot drawn twice would overwrite itself and leave
+    # fewer than N files: draw until N distinct robots (bounded for tiny design spaces).
+    robots: dict[str, Robot] = {}
+    for _ in range(100 * args.count):
+        if len(robots) == args.count:
+            break
+        robot = random_robot(rng, params)
+        robots.setdefault(robot.hash, robot)
+    if len(robots) < args.count:
+        raise OperatorError(
+            f"only {len(robots)} distinct robots in {100 * args.count} draws; "
+            "raise --max-depth or lower --p-empty"
+        )
+    _write(list(robots.values()), Path(args.out))
     return EXIT_OK
 
 
@@ -93,12 +107,39 @@ def _info(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _mujoco_loads(verb: str) -> bool:
+    """Import MuJoCo, or say why not and return False.
+
+    MuJoCo sets up the OpenGL backend named by ``MUJOCO_GL`` when it is imported, and a
+    backend that is unknown or not installed fails right there (in many ways). So only
+    the verbs that need MuJoCo import it, and a failure is one line, not a traceback.
+    """
+    try:
+        import mujoco  # noqa: F401
+    except Exception as err:  # noqa: BLE001 - a broken GL backend fails in many ways
+        backend = os.environ.get("MUJOCO_GL", "(unset)")
+        print(
+            f"{verb}: cannot load MuJoCo with MUJOCO_GL={backend}: {err}. "
+            "Try MUJOCO_GL=egl, or unset it.",
+            file=sys.stderr,
+        )
+        return False
+    return True
+
+
 def _mjcf(args: argparse.Namespace) -> int:
-    print(build(load_robot(args.file)).xml)
+    robot = load_robot(args.file)
+    if not _mujoco_loads("mjcf"):
+        return EXIT_UNREADABLE
+    from evo.robot.builder import build
+
+    print(build(robot).xml)
     return EXIT_OK
 
 
 def _render(args: argparse.Namespace) -> int:
+    if not _mujoco_loads("render"):
+        return EXIT_UNREADABLE
     from evo.robot.render import RenderError, render_png
 
     try:

@@ -1,0 +1,286 @@
+"""What every learner shares: its config, the policy networks, results and checkpoints.
+
+The policy is a Gaussian (paper Eq. 5): an MLP gives the mean action, a learned
+state-independent log standard deviation gives the spread; the critic is an MLP of the
+same shape. Both read the observation through one ``RunningNorm``, which keeps the
+normalisation statistics inside the networks' ``state_dict``, so a checkpoint alone
+reproduces the policy (no environment transform to restore).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import pandas as pd
+import torch
+from tensordict.nn import TensorDictModule
+from torch import nn
+from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
+
+from evo.envs.task import EnvConfig
+from evo.robot.builder import PhysicsParams
+from evo.robot.tree import Robot
+
+
+@dataclass(frozen=True, slots=True)
+class LearnerConfig:
+    """One ``conf/learner/*.yaml``.
+
+    Attributes:
+        name: ``ppo`` (learns) or ``random`` (the same network, never updated).
+        update: Whether the policy is trained (False for the random learner).
+        total_steps: Training budget in env steps when run alone (the GA sets its own).
+        num_envs: Arenas stepped together in one process.
+        rollout_steps: Control steps per arena per collector batch.
+        epochs: Passes over each batch.
+        minibatch_size: Samples per gradient step.
+        lr: Adam learning rate, decayed linearly to 0 over the budget if ``anneal_lr``.
+        anneal_lr: Decay the learning rate linearly over the budget.
+        gamma: Discount factor.
+        lmbda: GAE lambda.
+        clip_epsilon: PPO ratio clip.
+        entropy_coeff: Weight of the entropy bonus.
+        critic_coeff: Weight of the value loss.
+        max_grad_norm: Gradient norm clip.
+        hidden: Hidden layer widths of the policy and value MLPs.
+        init_log_std: Initial log standard deviation of the Gaussian policy.
+        normalize_obs: Normalise observations with running statistics.
+        eval_episodes: Episodes of the deterministic evaluation after training.
+    """
+
+    name: str = "ppo"
+    update: bool = True
+    total_steps: int = 150_000
+    num_envs: int = 32
+    rollout_steps: int = 64
+    epochs: int = 4
+    minibatch_size: int = 512
+    lr: float = 3e-4
+    anneal_lr: bool = True
+    gamma: float = 0.99
+    lmbda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coeff: float = 0.005
+    critic_coeff: float = 0.5
+    max_grad_norm: float = 0.5
+    hidden: tuple[int, ...] = (128, 128)
+    init_log_std: float = -0.5
+    normalize_obs: bool = True
+    eval_episodes: int = 20
+
+    def __post_init__(self) -> None:
+        positive = ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size")
+        for key in positive:
+            if getattr(self, key) < 1:
+                raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
+        if self.lr <= 0 or not 0 < self.gamma <= 1 or not 0 <= self.lmbda <= 1:
+            raise ValueError("need lr > 0, 0 < gamma <= 1 and 0 <= lmbda <= 1")
+        if self.eval_episodes < 0:
+            raise ValueError(f"eval_episodes must be >= 0, got {self.eval_episodes}")
+        if not self.hidden or min(self.hidden) < 1:
+            raise ValueError(f"hidden must list positive layer widths, got {self.hidden}")
+
+    @property
+    def frames_per_batch(self) -> int:
+        """Env steps per collector batch (all arenas)."""
+        return self.num_envs * self.rollout_steps
+
+
+class RunningNorm(nn.Module):
+    """Observation normalisation with running mean and variance (kept as buffers).
+
+    ``update`` merges a batch's statistics (Chan et al.'s parallel formula); the forward
+    pass standardises and clips to ``[-clip, clip]``.
+    """
+
+    count: torch.Tensor
+    mean: torch.Tensor
+    var: torch.Tensor
+
+    def __init__(self, size: int, clip: float = 10.0, enabled: bool = True) -> None:
+        super().__init__()
+        self.clip, self.enabled = clip, enabled
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+        self.register_buffer("mean", torch.zeros(size))
+        self.register_buffer("var", torch.ones(size))
+
+    @torch.no_grad()
+    def update(self, x: torch.Tensor) -> None:
+        """Fold the rows of ``x`` (any leading shape, last dim = size) into the statistics."""
+        if not self.enabled:
+            return
+        x = x.reshape(-1, x.shape[-1]).double()
+        n = x.shape[0]
+        total = self.count + n
+        delta = x.mean(0) - self.mean.double()
+        mean = self.mean.double() + delta * n / total
+        m2 = self.var.double() * self.count + x.var(0, unbiased=False) * n
+        m2 = m2 + delta**2 * self.count * n / total
+        self.mean.copy_(mean)
+        self.var.copy_(m2 / total)
+        self.count.copy_(total)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.enabled or self.count == 0:
+            return x
+        return ((x - self.mean) / torch.sqrt(self.var + 1e-8)).clamp(-self.clip, self.clip)
+
+
+def _mlp(inputs: int, outputs: int, hidden: tuple[int, ...], out_gain: float) -> MLP:
+    """A tanh MLP with orthogonal initialisation (gain sqrt 2 inside, ``out_gain`` last)."""
+    net = MLP(
+        in_features=inputs, out_features=outputs, num_cells=list(hidden), activation_class=nn.Tanh
+    )
+    linears = [m for m in net.modules() if isinstance(m, nn.Linear)]
+    for layer in linears:
+        nn.init.orthogonal_(layer.weight, gain=out_gain if layer is linears[-1] else math.sqrt(2))
+        nn.init.zeros_(layer.bias)
+    return net
+
+
+class GaussianHead(nn.Module):
+    """Mean from an MLP of the normalised observation, scale from a learned log std."""
+
+    def __init__(
+        self, norm: RunningNorm, obs: int, act: int, hidden: tuple[int, ...], init_log_std: float
+    ) -> None:
+        super().__init__()
+        self.norm, self.mlp = norm, _mlp(obs, act, hidden, out_gain=0.01)
+        self.log_std = nn.Parameter(torch.full((act,), init_log_std))
+
+    def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        loc = self.mlp(self.norm(observation))
+        return loc, self.log_std.exp().expand_as(loc)
+
+
+class ValueHead(nn.Module):
+    """State value from an MLP of the normalised observation."""
+
+    def __init__(self, norm: RunningNorm, obs: int, hidden: tuple[int, ...]) -> None:
+        super().__init__()
+        self.norm, self.mlp = norm, _mlp(obs, 1, hidden, out_gain=1.0)
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        value: torch.Tensor = self.mlp(self.norm(observation))
+        return value
+
+
+@dataclass
+class Policy:
+    """The networks of one learner: actor, critic and their shared normaliser."""
+
+    norm: RunningNorm
+    actor: ProbabilisticActor
+    critic: ValueOperator
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything a checkpoint needs (tensors and plain numbers only)."""
+        head = self.actor.module[0].module
+        return {
+            "obs_size": int(head.mlp[0].in_features),
+            "action_size": int(head.log_std.numel()),
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+        }
+
+
+def make_policy(obs_size: int, action_size: int, config: LearnerConfig) -> Policy:
+    """Fresh actor and critic for ``obs_size`` observations and ``action_size`` actions."""
+    norm = RunningNorm(obs_size, enabled=config.normalize_obs)
+    head = GaussianHead(norm, obs_size, action_size, config.hidden, config.init_log_std)
+    actor = ProbabilisticActor(
+        TensorDictModule(head, in_keys=["observation"], out_keys=["loc", "scale"]),
+        in_keys=["loc", "scale"],
+        distribution_class=IndependentNormal,
+        return_log_prob=True,
+    )
+    critic = ValueOperator(ValueHead(norm, obs_size, config.hidden), in_keys=["observation"])
+    return Policy(norm, actor, critic)
+
+
+@dataclass
+class TrainResult:
+    """What one training run returns.
+
+    Attributes:
+        fitness: Mean return of all episodes completed during the run (paper Eq. 8);
+            when none completed, the mean return so far of the unfinished ones.
+        curve: One row per collector batch (see ``evo.learners.ppo``).
+        policy: The trained networks.
+        env_steps: Env steps taken.
+        episodes: Episodes completed.
+        wall_seconds: Wall time of the run.
+        unstable: Episodes ended by a numerical blow-up.
+        timing: Seconds spent in physics, the rest of the env, policy and update.
+    """
+
+    fitness: float
+    curve: pd.DataFrame
+    policy: Policy
+    env_steps: int
+    episodes: int
+    wall_seconds: float
+    unstable: int = 0
+    timing: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def steps_per_second(self) -> float:
+        """Env steps per wall second, end to end."""
+        return self.env_steps / max(self.wall_seconds, 1e-9)
+
+
+def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig) -> Path:
+    """Write the policy to ``path``; ``torch.load(path, weights_only=True)`` reads it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = policy.state_dict()
+    state["hidden"] = list(config.hidden)
+    state["normalize_obs"] = config.normalize_obs
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(state, tmp)
+    tmp.replace(path)
+    return path
+
+
+def load_checkpoint(path: Path) -> Policy:
+    """The policy saved by ``save_checkpoint``; a clear error for a missing or bad file."""
+    try:
+        state = torch.load(path, weights_only=True)
+        config = LearnerConfig(
+            hidden=tuple(state["hidden"]), normalize_obs=bool(state["normalize_obs"])
+        )
+        policy = make_policy(int(state["obs_size"]), int(state["action_size"]), config)
+        policy.actor.load_state_dict(state["actor"])
+        policy.critic.load_state_dict(state["critic"])
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such checkpoint") from None
+    except (KeyError, RuntimeError, TypeError, EOFError) as err:
+        raise ValueError(f"{path}: not an evo policy checkpoint ({err})") from None
+    return policy
+
+
+class Learner(Protocol):
+    """A learner: trains one robot's behaviour for ``budget`` env steps."""
+
+    def __call__(
+        self,
+        robot: Robot,
+        *,
+        physics: PhysicsParams,
+        env: EnvConfig,
+        config: LearnerConfig,
+        budget: int,
+        seed: int,
+        on_curve: Callable[[dict[str, float]], None] | None = None,
+    ) -> TrainResult: ...
+
+
+def get_learner(config: LearnerConfig) -> Learner:
+    """The training function for ``config`` (PPO, or the random learner when
+    ``update`` is false)."""
+    from evo.learners import ppo, random
+
+    return ppo.train if config.update else random.train

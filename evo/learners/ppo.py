@@ -1,0 +1,263 @@
+"""PPO on the batched ``ReachEnv`` through TorchRL: collector, GAE and ``ClipPPOLoss``.
+
+``train`` reads top to bottom: build the env and networks, then for every collector
+batch compute advantages, run ``epochs`` passes of minibatch updates, fold the batch
+into the observation statistics, and append one learning-curve row. With
+``update=False`` the same loop only collects: that is the random learner (the "R"
+behaviour of the paper's ablations), which takes the same env steps so its fitness is
+comparable.
+
+Learning-curve row (one per collector batch; every value a float):
+
+* ``env_steps``: env steps taken so far; ``episodes``: episodes completed in the batch;
+* ``mean_return``, ``success_rate``, ``episode_length``: over the episodes completed in
+  the batch (NaN when none completed);
+* ``reward/<term>``: mean per env step of each reward term in the batch;
+* ``loss/objective``, ``loss/critic``, ``loss/entropy``, ``entropy``, ``kl``,
+  ``clip_fraction``, ``lr``: means over the batch's minibatch updates (NaN when the
+  learner does not update);
+* ``wall_seconds``: since the start of training.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+from tensordict import TensorDictBase
+from torchrl.collectors import Collector
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives import ClipPPOLoss
+from torchrl.objectives.value import GAE
+
+from evo.envs.reach import make_env
+from evo.envs.task import REWARD_TERMS, EnvConfig
+from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
+from evo.robot.builder import PhysicsParams
+from evo.robot.tree import Robot
+
+CurveHook = Callable[[dict[str, float]], None]
+"""Called with every learning-curve row as soon as it exists (recorders, progress)."""
+
+_LOSS_KEYS = {
+    "loss/objective": "loss_objective",
+    "loss/critic": "loss_critic",
+    "loss/entropy": "loss_entropy",
+    "entropy": "entropy",
+    "kl": "kl_approx",
+    "clip_fraction": "clip_fraction",
+}
+
+
+def _completed(batch: TensorDictBase) -> dict[str, torch.Tensor]:
+    """Return, success and length of every episode that ended in ``batch``."""
+    nxt = batch["next"]
+    done = nxt["done"].squeeze(-1)
+    return {
+        "return": nxt["episode_return"].squeeze(-1)[done],
+        "success": nxt["success"].squeeze(-1)[done].float(),
+        "length": nxt["episode_length"].squeeze(-1)[done].float(),
+    }
+
+
+def _episode_stats(episodes: dict[str, torch.Tensor]) -> dict[str, float]:
+    n = int(episodes["return"].numel())
+    nan = float("nan")
+    return {
+        "episodes": float(n),
+        "mean_return": float(episodes["return"].mean()) if n else nan,
+        "success_rate": float(episodes["success"].mean()) if n else nan,
+        "episode_length": float(episodes["length"].mean()) if n else nan,
+    }
+
+
+def _update(
+    batch: TensorDictBase,
+    loss: ClipPPOLoss,
+    optimizer: torch.optim.Optimizer,
+    config: LearnerConfig,
+) -> dict[str, float]:
+    """``epochs`` passes of shuffled minibatch PPO updates over ``batch``."""
+    flat = batch.reshape(-1)
+    sums: dict[str, float] = dict.fromkeys(_LOSS_KEYS, 0.0)
+    count = 0
+    for _ in range(config.epochs):
+        for index in torch.split(torch.randperm(flat.numel()), config.minibatch_size):
+            out = loss(flat[index])
+            total = out["loss_objective"] + out["loss_critic"] + out["loss_entropy"]
+            optimizer.zero_grad()
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(loss.parameters(), config.max_grad_norm)
+            optimizer.step()
+            for name, key in _LOSS_KEYS.items():
+                if key in out:
+                    sums[name] += float(out[key].detach().mean())
+            count += 1
+    return {name: value / count for name, value in sums.items()}
+
+
+def train(
+    robot: Robot,
+    *,
+    physics: PhysicsParams,
+    env: EnvConfig,
+    config: LearnerConfig,
+    budget: int,
+    seed: int,
+    on_curve: CurveHook | None = None,
+) -> TrainResult:
+    """Train ``robot``'s behaviour for ``budget`` env steps (or only collect, if
+    ``config.update`` is false) and return its fitness, curve and policy.
+
+    Randomness comes only from ``seed`` (targets, rocks, network initialisation, action
+    noise, minibatch order); torch's global generator is left as it was.
+    """
+    if budget < 1:
+        raise ValueError(f"budget must be >= 1 env step, got {budget}")
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return _train(robot, physics, env, config, budget, seed, on_curve)
+
+
+def _train(
+    robot: Robot,
+    physics: PhysicsParams,
+    env_config: EnvConfig,
+    config: LearnerConfig,
+    budget: int,
+    seed: int,
+    on_curve: CurveHook | None,
+) -> TrainResult:
+    start = time.perf_counter()
+    env = make_env(robot, physics, env_config, config.num_envs, seed)
+    policy = make_policy(env.core.obs_size, env.core.action_size, config)
+    loss = ClipPPOLoss(
+        policy.actor,
+        policy.critic,
+        clip_epsilon=config.clip_epsilon,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type="l2",
+        normalize_advantage=True,
+    )
+    gae = GAE(
+        gamma=config.gamma, lmbda=config.lmbda, value_network=policy.critic, deactivate_vmap=True
+    )
+    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
+    frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
+    collector = Collector(
+        env, policy.actor, frames_per_batch=config.frames_per_batch, total_frames=frames,
+        auto_register_policy_transforms=False,
+    )
+    rows: list[dict[str, float]] = []
+    returns_sum, returns_count, steps = 0.0, 0, 0
+    timing = dict.fromkeys(("collect", "update"), 0.0)
+    tick = time.perf_counter()
+    try:
+        for batch in collector:
+            timing["collect"] += time.perf_counter() - tick
+            tick = time.perf_counter()
+            steps += batch.numel()
+            episodes = _completed(batch)
+            returns_sum += float(episodes["return"].sum())
+            returns_count += int(episodes["return"].numel())
+            row = {"env_steps": float(steps), **_episode_stats(episodes)}
+            for term in REWARD_TERMS:
+                row[f"reward/{term}"] = float(batch["next", "reward_terms", term].mean())
+            row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
+            row["wall_seconds"] = time.perf_counter() - start
+            rows.append(row)
+            if on_curve is not None:
+                on_curve(row)
+            timing["update"] += time.perf_counter() - tick
+            tick = time.perf_counter()
+    finally:
+        collector.shutdown()
+    # When no episode ended within the budget, judge the running ones.
+    fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
+    timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
+    return TrainResult(
+        fitness=fitness,
+        curve=pd.DataFrame(rows),
+        policy=policy,
+        env_steps=steps,
+        episodes=returns_count,
+        wall_seconds=time.perf_counter() - start,
+        unstable=env.core.unstable_count,
+        timing=timing,
+    )
+
+
+def _learn(
+    batch: TensorDictBase,
+    loss: ClipPPOLoss,
+    gae: GAE,
+    optimizer: torch.optim.Optimizer,
+    policy: Policy,
+    config: LearnerConfig,
+    steps: int,
+    budget: int,
+) -> dict[str, float]:
+    """One PPO update on ``batch``, then the observation statistics; NaN losses when the
+    learner does not update."""
+    if not config.update:
+        return {**dict.fromkeys(_LOSS_KEYS, float("nan")), "lr": 0.0}
+    lr = config.lr * (max(0.0, 1 - (steps - batch.numel()) / budget) if config.anneal_lr else 1)
+    for group in optimizer.param_groups:
+        group["lr"] = lr
+    with torch.no_grad():
+        gae(batch)
+    losses = _update(batch, loss, optimizer, config)
+    # Statistics change only after the update, so the update's ratios start at 1.
+    policy.norm.update(batch["observation"])
+    return {**losses, "lr": lr}
+
+
+def act_deterministic(policy: Policy, observation: torch.Tensor) -> torch.Tensor:
+    """The policy's mean action for ``observation`` (no exploration noise)."""
+    from tensordict import TensorDict
+
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = TensorDict({"observation": observation}, batch_size=observation.shape[:-1])
+        action: torch.Tensor = policy.actor(td)["action"]
+    return action
+
+
+def evaluate(
+    robot: Robot,
+    policy: Policy,
+    *,
+    physics: PhysicsParams,
+    env: EnvConfig,
+    episodes: int,
+    seed: int,
+) -> dict[str, Any]:
+    """Run ``episodes`` deterministic episodes (one per arena, in parallel).
+
+    Returns:
+        ``success_rate``, ``mean_return`` and the list of ``returns``.
+    """
+    reach = make_env(robot, physics, env, episodes, seed)
+    td = reach.reset()
+    finished = torch.zeros(episodes, dtype=torch.bool)
+    returns = torch.zeros(episodes)
+    success = torch.zeros(episodes, dtype=torch.bool)
+    while not finished.all():
+        td["action"] = act_deterministic(policy, td["observation"])
+        nxt = reach.step(td)["next"]
+        done = nxt["done"].squeeze(-1) & ~finished
+        returns[done] = nxt["episode_return"].squeeze(-1)[done]
+        success[done] = nxt["success"].squeeze(-1)[done]
+        finished |= done
+        td = nxt
+    reach.close()
+    return {
+        "success_rate": float(success.float().mean()),
+        "mean_return": float(returns.mean()),
+        "returns": returns.tolist(),
+    }

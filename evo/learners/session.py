@@ -1,0 +1,160 @@
+"""One robot trained or evaluated from the command line (``+exp=train``, ``+exp=evaluate``).
+
+``train_robot`` writes into the run directory: ``robot.json``, ``curve.csv`` (the
+learning curve, one row per collector batch), ``policy.pt`` (loads with
+``torch.load(..., weights_only=True)``) and ``summary.json`` (``fitness``,
+``success_rate``, ``eval_mean_return``, ``env_steps``, ``wall_seconds``,
+``steps_per_second`` and more), and shows progress while it runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from evo.envs.task import EnvConfig
+from evo.learners.common import LearnerConfig, get_learner, load_checkpoint, save_checkpoint
+from evo.learners.ppo import evaluate
+from evo.robot.builder import PhysicsParams
+from evo.robot.io import save_robot
+from evo.robot.tree import Robot
+
+
+def write_json(path: Path, data: dict[str, Any]) -> Path:
+    """Write ``data`` as JSON atomically (a crash leaves the old file or the new one)."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    tmp.replace(path)
+    return path
+
+
+def _progress(console: Console) -> Progress:
+    return Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+        TextColumn("{task.fields[status]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+    )
+
+
+def train_robot(
+    robot: Robot,
+    *,
+    physics: PhysicsParams,
+    env: EnvConfig,
+    learner: LearnerConfig,
+    seed: int,
+    out: Path,
+    console: Console | None = None,
+) -> dict[str, Any]:
+    """Train ``robot`` for ``learner.total_steps``, evaluate it, write the run files.
+
+    Returns:
+        The summary also written to ``out/summary.json``.
+    """
+    console = console or Console()
+    out.mkdir(parents=True, exist_ok=True)
+    save_robot(robot, out / "robot.json")
+    train = get_learner(learner)
+    with _progress(console) as bar:
+        task = bar.add_task(f"{learner.name} {robot.name}", total=learner.total_steps, status="")
+
+        def show(row: dict[str, float]) -> None:
+            ret, ok = row["mean_return"], row["success_rate"]
+            status = "" if math.isnan(ret) else f"return {ret:+.3f}  success {ok:.0%}"
+            bar.update(task, completed=min(row["env_steps"], learner.total_steps), status=status)
+
+        result = train(
+            robot,
+            physics=physics,
+            env=env,
+            config=learner,
+            budget=learner.total_steps,
+            seed=seed,
+            on_curve=show,
+        )
+    result.curve.to_csv(out / "curve.csv", index=False)
+    save_checkpoint(result.policy, out / "policy.pt", learner)
+    summary: dict[str, Any] = {
+        "robot": robot.name,
+        "learner": learner.name,
+        "arena": env.name,
+        "seed": seed,
+        "fitness": result.fitness,
+        "episodes": result.episodes,
+        "env_steps": result.env_steps,
+        "wall_seconds": result.wall_seconds,
+        "steps_per_second": result.steps_per_second,
+        "unstable_episodes": result.unstable,
+        "timing_seconds": result.timing,
+    }
+    if learner.eval_episodes:
+        evaluation = evaluate(
+            robot,
+            result.policy,
+            physics=physics,
+            env=env,
+            episodes=learner.eval_episodes,
+            seed=seed + 1,
+        )
+        summary["success_rate"] = evaluation["success_rate"]
+        summary["eval_mean_return"] = evaluation["mean_return"]
+        summary["eval_episodes"] = learner.eval_episodes
+    write_json(out / "summary.json", summary)
+    console.print(
+        f"{robot.name}: fitness {result.fitness:+.4f} over {result.episodes} episodes, "
+        f"{result.env_steps:,} env steps in {result.wall_seconds:.1f} s "
+        f"({result.steps_per_second:,.0f} steps/s)"
+    )
+    if "success_rate" in summary:
+        console.print(
+            f"deterministic evaluation: success {summary['success_rate']:.0%}, mean return "
+            f"{summary['eval_mean_return']:+.4f} over {learner.eval_episodes} episodes"
+        )
+    console.print(f"files: {out}")
+    return summary
+
+
+def evaluate_robot(
+    robot: Robot,
+    checkpoint: Path,
+    *,
+    physics: PhysicsParams,
+    env: EnvConfig,
+    episodes: int,
+    seed: int,
+    out: Path,
+    console: Console | None = None,
+) -> dict[str, Any]:
+    """Run the policy in ``checkpoint`` deterministically for ``episodes`` episodes."""
+    console = console or Console()
+    policy = load_checkpoint(checkpoint)
+    if policy.actor.module[0].module.log_std.numel() != robot.action_size:
+        raise ValueError(
+            f"{checkpoint}: the policy acts on {policy.actor.module[0].module.log_std.numel()} "
+            f"actuators but {robot.name} has {robot.action_size}"
+        )
+    evaluation = evaluate(robot, policy, physics=physics, env=env, episodes=episodes, seed=seed)
+    summary = {
+        "robot": robot.name,
+        "checkpoint": str(checkpoint),
+        "arena": env.name,
+        "episodes": episodes,
+        "seed": seed,
+        **evaluation,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "summary.json", summary)
+    console.print(
+        f"{robot.name}: success {evaluation['success_rate']:.0%}, mean return "
+        f"{evaluation['mean_return']:+.4f} over {episodes} deterministic episodes"
+    )
+    return summary
