@@ -1,0 +1,77 @@
+"""The GA population over a run, replayed from a robots table, and best-so-far traces.
+
+A steady-state GA keeps no per-generation snapshot in the robots table, but the table
+holds enough to replay it: the first ``population_size`` robots of a run form the
+initial population; each later robot, in birth order, faced the population's minimum
+and, where ``accepted``, replaced that minimum. With asynchronous evaluation the birth
+order is the order in which results came back, which is the order the GA applied them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from analysis.tables import require_columns
+
+
+def population_trace(robots: pd.DataFrame, population_size: int = 20) -> pd.DataFrame:
+    """For every robot, the population minimum it had to beat and the population after it.
+
+    Args:
+        robots: Robots table (``run``, ``birth``, ``name``, ``fitness``, ``accepted``).
+        population_size: Size of the initial population (SPEC default 20).
+
+    Returns:
+        One row per robot, sorted by run and birth: ``run``, ``birth``, ``name``,
+        ``threshold`` (population minimum before its evaluation; NaN for the initial
+        population), and ``pop_min``, ``pop_mean``, ``pop_max`` after it was applied.
+    """
+    require_columns(robots, ("run", "birth", "name", "fitness", "accepted"), "robots table")
+    parts = [
+        _replay(run_rows.sort_values("birth"), population_size)
+        for _, run_rows in robots.groupby("run", sort=True)
+    ]
+    return pd.concat(parts, ignore_index=True)
+
+
+def _replay(rows: pd.DataFrame, population_size: int) -> pd.DataFrame:
+    population: list[float] = []
+    threshold, pop_min, pop_mean, pop_max = [], [], [], []
+    for i, (fitness, accepted) in enumerate(zip(rows["fitness"], rows["accepted"],
+                                               strict=True)):
+        if i < population_size:
+            threshold.append(np.nan)
+            population.append(float(fitness))
+        else:
+            worst = int(np.argmin(population))
+            threshold.append(population[worst])
+            if accepted:
+                population[worst] = float(fitness)
+        pop_min.append(min(population))
+        pop_mean.append(float(np.mean(population)))
+        pop_max.append(max(population))
+    return pd.DataFrame(dict(
+        run=rows["run"].to_numpy(), birth=rows["birth"].to_numpy(), name=rows["name"].to_numpy(),
+        threshold=threshold, pop_min=pop_min, pop_mean=pop_mean, pop_max=pop_max,
+    ))
+
+
+def best_so_far(robots: pd.DataFrame) -> pd.DataFrame:
+    """Best fitness found so far against the env steps spent so far, per run.
+
+    Args:
+        robots: Robots table (``run``, ``method``, ``seed``, ``birth``, ``budget``,
+            ``fitness``).
+
+    Returns:
+        ``run``, ``method``, ``seed``, ``birth``, ``env_steps`` (cumulative budget up to
+        and including this robot) and ``best`` (running maximum of fitness).
+    """
+    require_columns(robots, ("run", "method", "seed", "birth", "budget", "fitness"),
+                    "robots table")
+    table = robots.sort_values(["run", "birth"])[["run", "method", "seed", "birth"]].copy()
+    ordered = robots.sort_values(["run", "birth"]).groupby("run", sort=False)
+    table["env_steps"] = ordered["budget"].cumsum()
+    table["best"] = ordered["fitness"].cummax()
+    return table.reset_index(drop=True)
