@@ -66,14 +66,15 @@ def _random(args: argparse.Namespace) -> int:
     # Files are named by hash, so a robot drawn twice would overwrite itself and leave
     # fewer than N files: draw until N distinct robots (bounded for tiny design spaces).
     robots: dict[str, Robot] = {}
-    for _ in range(100 * args.count):
+    draws = 20 * args.count + 100
+    for _ in range(draws):
         if len(robots) == args.count:
             break
         robot = random_robot(rng, params)
         robots.setdefault(robot.hash, robot)
     if len(robots) < args.count:
         raise OperatorError(
-            f"only {len(robots)} distinct robots in {100 * args.count} draws; "
+            f"only {len(robots)} distinct robots in {draws} draws; "
             "raise --max-depth or lower --p-empty"
         )
     _write(list(robots.values()), Path(args.out))
