@@ -1,0 +1,561 @@
+"""Early-slope prediction (paper §8, §9): does the start of a learning curve rank robots?
+
+The paper conjectures that how fast the mean return rises early in training predicts a
+robot's final fitness, and that the slope catches the late risers the early value
+misses. These pure functions test that on a robots table and a curves table (schemas in
+:mod:`analysis.tables`).
+
+**Prefix.** A robot's curve cut at ``fraction × budget`` env steps: its collector
+batches with ``env_steps`` at or below the cut. Batches that completed no episode
+(``mean_return`` NaN) carry no information and are skipped.
+
+**Predictors** (one number per robot and cut):
+
+* ``value``: mean return of the episodes completed in the last ``last`` informative
+  batches of the prefix (episode-weighted).
+* ``slope``: Theil–Sen slope of the batch mean return over the second half of the
+  prefix (``env_steps ≥ cut / 2``), in return per 1,000 env steps; robust to the odd
+  batch that ends one lucky or unlucky episode.
+* ``area``: trapezoidal area under the prefix divided by its span: the prefix's
+  time-averaged return, comparable across robots whose budgets differ.
+* ``curve``: ``a − b·exp(−c·τ)`` (``τ = env_steps / budget``) fitted to the prefix,
+  evaluated at ``τ = 1``, the full budget. A grid over ``c`` ∈ [0.1, 100] (where the
+  model is linear in ``a``, ``b``) gives the start; :func:`scipy.optimize.curve_fit`
+  refines it with a robust soft-L1 loss. With fewer than four points it falls back to
+  ``value``; if the refinement fails, to the grid fit.
+* ``value+slope``: least squares on ``(1, value, slope)``, cross-validated: a robot's
+  prediction comes from a model fitted on folds that hold no robot of its GA seed
+  (:func:`grouped_folds`), so the model never sees the run it predicts.
+
+**Targets.** ``fitness``: the paper's fitness, the mean return over the whole training;
+the prefix is part of it, which gives every predictor a head start. ``after_cut``: the
+mean return of the episodes completed after the cut, the part still unseen at the cut.
+
+**Metrics** (:func:`rank_metrics`): Spearman ρ, Kendall τ-b and top-10 % recall, each
+with a paired bootstrap CI whose unit follows :mod:`analysis.bootstrap`.
+:func:`rejection_tradeoff` prices an early-rejection rule: env steps saved against how
+many of the final top-k robots it would have thrown away. It is an offline, first-order
+estimate: it keeps the rest of each run as it happened, whereas a GA that rejects early
+would have bred other offspring afterwards. :func:`noise_ceiling` bounds what any
+predictor can reach: the rank agreement of the same structures trained twice.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import scipy.integrate
+import scipy.optimize
+import scipy.stats
+from numpy.typing import ArrayLike, NDArray
+
+from analysis.bootstrap import bootstrap_ci, resampling_units
+from analysis.population import population_trace
+from analysis.tables import CURVE_COLUMNS, require_columns
+
+FRACTIONS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.5, 0.75)
+PREDICTORS: tuple[str, ...] = ("value", "slope", "area", "curve", "value+slope")
+TARGETS: tuple[str, ...] = ("fitness", "after_cut")
+SLOPE_STEPS = 1_000
+"""The slope predictor is in return per this many env steps."""
+RATE_BOUNDS = (0.1, 100.0)
+"""Bounds of the saturating curve's rate ``c`` (per budget): from nearly linear over the
+whole budget to saturated within its first percent."""
+
+# ---------------------------------------------------------------- one robot's curve
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One robot's informative batches (those that completed episodes), in step order."""
+
+    steps: NDArray[np.float64]
+    returns: NDArray[np.float64]
+    episodes: NDArray[np.float64]
+
+    @classmethod
+    def from_rows(cls, rows: pd.DataFrame) -> Curve:
+        """Build from one robot's rows of a curves table, dropping uninformative batches."""
+        done = rows[(rows["episodes"] > 0) & np.isfinite(rows["mean_return"])]
+        done = done.sort_values("env_steps")
+        return cls(done["env_steps"].to_numpy(dtype=float),
+                   done["mean_return"].to_numpy(dtype=float),
+                   done["episodes"].to_numpy(dtype=float))
+
+    def select(self, mask: NDArray[np.bool_]) -> Curve:
+        """The batches where ``mask`` holds."""
+        return Curve(self.steps[mask], self.returns[mask], self.episodes[mask])
+
+    def prefix(self, cut: float) -> Curve:
+        """The batches at or before ``cut`` env steps."""
+        return self.select(self.steps <= cut)
+
+    def after(self, cut: float) -> Curve:
+        """The batches after ``cut`` env steps."""
+        return self.select(self.steps > cut)
+
+    def episode_mean(self) -> float:
+        """Mean return over all episodes of these batches; NaN when there are none."""
+        if self.episodes.sum() <= 0:
+            return np.nan
+        return float(np.average(self.returns, weights=self.episodes))
+
+
+def curve_fitness(curves: pd.DataFrame) -> pd.Series:
+    """The paper's fitness (Eq. 8) of every robot, recomputed from its curve.
+
+    Args:
+        curves: Curves table.
+
+    Returns:
+        Episode-weighted mean return per robot, indexed by ``(run, name)``.
+    """
+    require_columns(curves, CURVE_COLUMNS, "curves table")
+    done = curves[(curves["episodes"] > 0) & np.isfinite(curves["mean_return"])]
+    totals = (done["mean_return"] * done["episodes"]).groupby([done["run"], done["name"]])
+    return (totals.sum() / done.groupby(["run", "name"])["episodes"].sum()).rename("fitness")
+
+
+def value_at_cut(prefix: Curve, last: int = 3) -> float:
+    """Episode-weighted mean return of the last ``last`` batches of ``prefix``."""
+    return prefix.select(np.arange(len(prefix.steps)) >= len(prefix.steps) - last).episode_mean()
+
+
+def late_slope(prefix: Curve, cut: float) -> float:
+    """Theil–Sen slope over the second half of the prefix, per :data:`SLOPE_STEPS` steps.
+
+    Returns:
+        The slope, or NaN with fewer than two distinct step counts in that half.
+    """
+    half = prefix.select(prefix.steps >= cut / 2)
+    if len(np.unique(half.steps)) < 2:
+        return np.nan
+    return float(scipy.stats.theilslopes(half.returns, half.steps).slope) * SLOPE_STEPS
+
+
+def prefix_area(prefix: Curve) -> float:
+    """Trapezoidal area under the prefix over its span (its time-averaged return)."""
+    if len(prefix.steps) == 0:
+        return np.nan
+    span = prefix.steps[-1] - prefix.steps[0]
+    if span == 0:
+        return float(prefix.returns.mean())
+    return float(scipy.integrate.trapezoid(prefix.returns, prefix.steps) / span)
+
+
+def saturating(tau: ArrayLike, a: float, b: float, c: float) -> Any:
+    """The saturating curve ``a − b·exp(−c·τ)``."""
+    return a - b * np.exp(-c * np.asarray(tau, dtype=float))
+
+
+def _saturating_jacobian(tau: ArrayLike, a: float, b: float, c: float) -> Any:
+    e = np.exp(-c * np.asarray(tau, dtype=float))
+    return np.column_stack([np.ones_like(e), -e, b * np.asarray(tau) * e])
+
+
+def _grid_fit(tau: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Least-squares ``(a, b, c)`` with ``c`` on a log grid over :data:`RATE_BOUNDS`.
+
+    For a fixed ``c`` the curve is linear in ``a`` and ``b``, so every grid point is a
+    two-column least-squares problem; the best one starts :func:`curve_fit`, which
+    then cannot wander off into a poor local minimum.
+    """
+    rates = np.geomspace(*RATE_BOUNDS, 64)
+    best: tuple[float, NDArray[np.float64]] = (np.inf, np.array([y.mean(), 0.0, 1.0]))
+    for c in rates:
+        design = np.column_stack([np.ones_like(tau), -np.exp(-c * tau)])
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        sse = float(np.sum((design @ coef - y) ** 2))
+        if sse < best[0]:
+            best = (sse, np.array([coef[0], coef[1], c]))
+    return best[1]
+
+
+def saturating_extrapolation(prefix: Curve, budget: float, fallback: float) -> float:
+    """Fit :func:`saturating` to the prefix and evaluate it at the full budget.
+
+    The fit starts from :func:`_grid_fit` and refines with
+    :func:`scipy.optimize.curve_fit` under a soft-L1 loss whose scale is the grid fit's
+    robust residual spread; if the refinement fails the grid fit is used.
+
+    Args:
+        prefix: Informative prefix of one robot's curve.
+        budget: The robot's env-step budget (``τ = env_steps / budget``).
+        fallback: Returned when there are fewer than four points.
+
+    Returns:
+        The extrapolated mean return at ``τ = 1``.
+    """
+    tau, y = prefix.steps / budget, prefix.returns
+    if len(tau) < 4 or np.ptp(tau) == 0:
+        return fallback
+    params = _grid_fit(tau, y)
+    spread = 1.4826 * np.median(np.abs(saturating(tau, *params) - y))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", scipy.optimize.OptimizeWarning)
+            params, _ = scipy.optimize.curve_fit(
+                saturating, tau, y, p0=params, jac=_saturating_jacobian,
+                bounds=([-np.inf, -np.inf, RATE_BOUNDS[0]], [np.inf, np.inf, RATE_BOUNDS[1]]),
+                loss="soft_l1", f_scale=max(float(spread), 1e-9), max_nfev=200,
+            )
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        pass
+    value = float(saturating(1.0, *params))
+    return value if np.isfinite(value) else fallback
+
+
+def robot_predictors(curve: Curve, budget: float, fraction: float, *,
+                     last: int = 3) -> dict[str, float]:
+    """The single-robot predictors at one cut, and the ``after_cut`` target.
+
+    Args:
+        curve: One robot's curve.
+        budget: Its env-step budget.
+        fraction: Cut as a fraction of the budget.
+        last: Batches averaged by ``value``.
+
+    Returns:
+        ``value``, ``slope``, ``area``, ``curve`` and ``after_cut``.
+    """
+    cut = fraction * budget
+    prefix = curve.prefix(cut)
+    value = value_at_cut(prefix, last)
+    return dict(
+        value=value,
+        slope=late_slope(prefix, cut),
+        area=prefix_area(prefix),
+        curve=saturating_extrapolation(prefix, budget, fallback=value),
+        after_cut=curve.after(cut).episode_mean(),
+    )
+
+
+# ---------------------------------------------------------------- all robots
+
+
+def early_table(
+    robots: pd.DataFrame,
+    curves: pd.DataFrame,
+    fractions: Sequence[float] = FRACTIONS,
+    *,
+    last: int = 3,
+    population_size: int = 20,
+) -> pd.DataFrame:
+    """Predictors and targets of every robot at every cut.
+
+    Args:
+        robots: Robots table.
+        curves: Curves table.
+        fractions: Cuts, as fractions of each robot's budget.
+        last: Batches averaged by ``value``.
+        population_size: Initial population size, to replay the population minimum
+            each robot had to beat (``threshold``; see :mod:`analysis.population`).
+
+    Returns:
+        One row per robot and cut: ``run``, ``method``, ``seed``, ``birth``, ``name``,
+        ``budget``, ``fitness``, ``threshold``, ``fraction``, the single-robot
+        predictors and ``after_cut``; sorted by run, birth and fraction. Robots without
+        a curve get NaN predictors.
+    """
+    require_columns(robots, ("run", "method", "seed", "birth", "name", "budget", "fitness",
+                             "accepted"), "robots table")
+    require_columns(curves, CURVE_COLUMNS, "curves table")
+    trace = population_trace(robots, population_size)[["run", "name", "threshold"]]
+    base = robots.merge(trace, on=["run", "name"], how="left").sort_values(["run", "birth"])
+    by_robot = {key: Curve.from_rows(rows)
+                for key, rows in curves.groupby(["run", "name"], sort=False)}
+    no_curve = Curve.from_rows(curves.iloc[:0])
+    rows = []
+    for robot in base.itertuples(index=False):
+        curve = by_robot.get((robot.run, robot.name), no_curve)
+        for fraction in fractions:
+            predictors = robot_predictors(curve, float(robot.budget), fraction, last=last)
+            rows.append(dict(fraction=fraction, **predictors))
+    table = pd.DataFrame(rows)
+    keep = ["run", "method", "seed", "birth", "name", "budget", "fitness", "threshold"]
+    repeated = base[keep].loc[base.index.repeat(len(fractions))].reset_index(drop=True)
+    return pd.concat([repeated, table], axis=1)
+
+
+def grouped_folds(groups: ArrayLike, n_splits: int = 5) -> list[NDArray[np.int64]]:
+    """Test-index folds that never split a group (a GA seed) across folds.
+
+    Groups go, largest first, to the fold holding the fewest rows so far (as
+    scikit-learn's ``GroupKFold``). With a single group there is nothing to hold out
+    by group; the rows are then cut into ``n_splits`` contiguous blocks in the given
+    order (birth order keeps relatives, born close together, mostly in one block).
+
+    Args:
+        groups: Group label per row.
+        n_splits: Number of folds (fewer when there are fewer groups or rows).
+
+    Returns:
+        One array of row indices per fold; together they cover every row once.
+    """
+    codes, labels = pd.factorize(np.asarray(groups))
+    n = len(codes)
+    if len(labels) < 2:
+        return [block.astype(np.int64) for block in np.array_split(np.arange(n),
+                                                                     min(n_splits, n))]
+    k = min(n_splits, len(labels))
+    sizes = np.bincount(codes)
+    fold_of_group = np.empty(len(labels), dtype=np.int64)
+    load = np.zeros(k)
+    for g in np.argsort(-sizes, kind="stable"):
+        fold_of_group[g] = int(np.argmin(load))
+        load[fold_of_group[g]] += sizes[g]
+    fold = fold_of_group[codes]
+    return [np.flatnonzero(fold == f) for f in range(k)]
+
+
+def cross_validated_linear(
+    rows: pd.DataFrame,
+    target: str,
+    *,
+    columns: Sequence[str] = ("value", "slope"),
+    group: str = "seed",
+    n_splits: int = 5,
+) -> pd.Series:
+    """Out-of-fold predictions of ``target`` from a linear model on ``columns``.
+
+    Args:
+        rows: One cut's rows of :func:`early_table`, in birth order within a run.
+        target: Column to predict.
+        columns: Feature columns (an intercept is added).
+        group: Column whose values are never split across folds.
+        n_splits: Number of folds.
+
+    Returns:
+        Predictions aligned with ``rows``; NaN where a feature or the target is missing.
+    """
+    x = rows[list(columns)].to_numpy(dtype=float)
+    y = rows[target].to_numpy(dtype=float)
+    usable = np.flatnonzero(np.isfinite(x).all(axis=1) & np.isfinite(y))
+    design = np.column_stack([np.ones(len(usable)), x[usable]])
+    out = np.full(len(rows), np.nan)
+    for test in grouped_folds(rows[group].to_numpy()[usable], n_splits):
+        train = np.setdiff1d(np.arange(len(usable)), test)
+        if len(train) < design.shape[1]:
+            continue
+        coef, *_ = np.linalg.lstsq(design[train], y[usable][train], rcond=None)
+        out[usable[test]] = design[test] @ coef
+    return pd.Series(out, index=rows.index, name="+".join(columns))
+
+
+def predictions(
+    table: pd.DataFrame, target: str = "fitness", *, group: str = "seed", n_splits: int = 5
+) -> pd.DataFrame:
+    """Long table of every predictor's prediction next to the target's actual value.
+
+    Args:
+        table: Output of :func:`early_table`.
+        target: ``"fitness"`` or ``"after_cut"``.
+        group: Grouping column for the cross-validated ``value+slope`` model.
+        n_splits: Folds of that model.
+
+    Returns:
+        The robot columns of ``table`` plus ``target`` (its name), ``actual``,
+        ``predictor`` and ``prediction``; one row per robot, cut and predictor.
+    """
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
+    wide = table.sort_values(["run", "birth", "fraction"]).copy()
+    wide["value+slope"] = pd.concat([
+        cross_validated_linear(rows, target, group=group, n_splits=n_splits)
+        for _, rows in wide.groupby("fraction", sort=True)
+    ])
+    wide["target"], wide["actual"] = target, wide[target]
+    ids = [c for c in wide.columns if c not in (*PREDICTORS, "after_cut")]
+    return wide.melt(id_vars=ids, value_vars=list(PREDICTORS), var_name="predictor",
+                     value_name="prediction")
+
+
+# ---------------------------------------------------------------- metrics
+
+
+def spearman(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
+    """Spearman ρ along ``axis`` (Pearson correlation of average ranks)."""
+    rx = scipy.stats.rankdata(x, axis=axis)
+    ry = scipy.stats.rankdata(y, axis=axis)
+    return scipy.stats.pearsonr(rx, ry, axis=axis).statistic
+
+
+def kendall(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
+    """Kendall τ-b along ``axis``."""
+    return scipy.stats.kendalltau(x, y, axis=axis).statistic
+
+
+def top_recall(prediction: ArrayLike, actual: ArrayLike, share: float = 0.1,
+               axis: int = -1) -> Any:
+    """Share of the actual top ``ceil(share·n)`` that the prediction also puts on top.
+
+    Ties are broken by position, so duplicates drawn by a bootstrap count separately.
+    """
+    p = np.moveaxis(np.asarray(prediction, dtype=float), axis, -1)
+    a = np.moveaxis(np.asarray(actual, dtype=float), axis, -1)
+    n = p.shape[-1]
+    k = max(1, math.ceil(share * n))
+
+    def on_top(v: NDArray[np.float64]) -> NDArray[np.bool_]:
+        return np.argsort(np.argsort(v, axis=-1, kind="stable"), axis=-1) >= n - k
+
+    return (on_top(p) & on_top(a)).sum(axis=-1) / k
+
+
+def rank_metrics(
+    preds: pd.DataFrame,
+    rng: np.random.Generator,
+    *,
+    share: float = 0.1,
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+) -> pd.DataFrame:
+    """Spearman ρ, Kendall τ and top-``share`` recall of every predictor at every cut.
+
+    Args:
+        preds: Output of :func:`predictions` (possibly several targets concatenated).
+        rng: Resampling randomness.
+        share: Top share for the recall (0.1: top 10 %).
+        confidence: Two-sided CI level.
+        n_resamples: Bootstrap resamples per interval.
+
+    Returns:
+        Long table ``target``, ``fraction``, ``predictor``, ``metric``, ``estimate``,
+        ``ci_low``, ``ci_high``, ``n`` (robots with both a prediction and a target).
+    """
+    metrics = {"spearman": spearman, "kendall": kendall,
+               "top_recall": lambda p, a, axis=-1: top_recall(p, a, share, axis)}
+    rows = []
+    for (target, fraction, predictor), group in preds.groupby(
+            ["target", "fraction", "predictor"], sort=False):
+        ok = group[np.isfinite(group["prediction"]) & np.isfinite(group["actual"])]
+        pair = [ok["prediction"].to_numpy(dtype=float), ok["actual"].to_numpy(dtype=float)]
+        units = resampling_units(ok)
+        for name, metric in metrics.items():
+            too_few = len(ok) < 3
+            estimate = np.nan if too_few else float(metric(*pair))
+            low, high = (np.nan, np.nan) if too_few else bootstrap_ci(
+                pair, metric, rng, units=[units], paired=True, confidence=confidence,
+                n_resamples=n_resamples)
+            rows.append(dict(target=target, fraction=fraction, predictor=predictor,
+                             metric=name, estimate=estimate, ci_low=low, ci_high=high,
+                             n=len(ok)))
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------- early rejection
+
+
+def rejection_tradeoff(
+    preds: pd.DataFrame,
+    *,
+    quantile: float = 0.25,
+    threshold_column: str | None = None,
+    top_k: int = 10,
+) -> pd.DataFrame:
+    """Env steps an early-rejection rule saves against the good robots it loses.
+
+    A robot is rejected at the cut when its prediction is below the threshold: the
+    ``quantile`` of all predictions at that cut, or, with ``threshold_column`` (e.g.
+    ``"threshold"``, the population minimum it had to beat), its own value there; a NaN
+    prediction or threshold never rejects. The second rule compares predictions with
+    fitness, so it only makes sense for predictors on the return scale; ``slope`` is
+    left out under it.
+
+    Args:
+        preds: Output of :func:`predictions`.
+        quantile: Share of robots the quantile rule rejects.
+        threshold_column: Per-robot threshold column, or None for the quantile rule.
+        top_k: Size of the final top (by ``fitness``) whose losses are counted.
+
+    Returns:
+        Per ``target``, ``fraction``, ``predictor``: ``n``, ``rejected``,
+        ``steps_saved`` (the rejected robots' budgets beyond the cut), ``steps_total``,
+        ``saved_share``, ``top_k_lost`` and ``best_lost``.
+    """
+    if threshold_column is not None:
+        preds = preds[preds["predictor"] != "slope"]
+    rows = []
+    for (target, fraction, predictor), group in preds.groupby(
+            ["target", "fraction", "predictor"], sort=False):
+        prediction = group["prediction"].to_numpy(dtype=float)
+        if threshold_column is None:
+            threshold = np.full(len(group), np.nanquantile(prediction, quantile))
+        else:
+            threshold = group[threshold_column].to_numpy(dtype=float)
+        rejected = prediction < threshold  # NaN on either side compares False
+        budget = group["budget"].to_numpy(dtype=float)
+        rank = group["fitness"].rank(ascending=False, method="first").to_numpy()
+        rows.append(dict(
+            target=target, fraction=fraction, predictor=predictor, n=len(group),
+            rejected=int(rejected.sum()),
+            steps_saved=float(((1 - fraction) * budget)[rejected].sum()),
+            steps_total=float(budget.sum()),
+            top_k_lost=int((rejected & (rank <= top_k)).sum()),
+            best_lost=bool((rejected & (rank == 1)).any()),
+        ))
+    columns = ["target", "fraction", "predictor", "n", "rejected", "steps_saved",
+               "steps_total", "top_k_lost", "best_lost"]
+    table = pd.DataFrame(rows, columns=columns)
+    table.insert(7, "saved_share", table["steps_saved"] / table["steps_total"])
+    return table
+
+
+# ---------------------------------------------------------------- noise ceiling
+
+
+def noise_ceiling(
+    retrained: pd.DataFrame,
+    rng: np.random.Generator,
+    *,
+    structure: str = "name",
+    seed: str = "train_seed",
+    value: str = "fitness",
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+) -> pd.Series:
+    """Seed-to-seed rank agreement of the same structures retrained with other seeds.
+
+    No early predictor can rank robots by fitness better than a second training run of
+    the same structure does, so this ρ is the ceiling for :func:`rank_metrics`. With
+    more than two training seeds it is the mean ρ over all seed pairs.
+
+    Args:
+        retrained: One row per (structure, training seed) with its ``value``.
+        rng: Resampling randomness (structures are resampled).
+        structure: Column naming the structure.
+        seed: Column naming the training seed.
+        value: Fitness column.
+        confidence: Two-sided CI level.
+        n_resamples: Bootstrap resamples.
+
+    Returns:
+        ``rho``, ``ci_low``, ``ci_high``, ``n_structures`` (with every seed present)
+        and ``n_seeds``.
+
+    Raises:
+        ValueError: With fewer than two training seeds.
+    """
+    require_columns(retrained, (structure, seed, value), "retrained table")
+    wide = retrained.pivot_table(index=structure, columns=seed, values=value,
+                                 aggfunc="mean").dropna()
+    if wide.shape[1] < 2:
+        raise ValueError(f"noise ceiling needs at least two values of {seed!r}")
+    columns = [wide[c].to_numpy(dtype=float) for c in wide.columns]
+    pairs = list(itertools.combinations(range(len(columns)), 2))
+
+    def mean_rho(*cols: NDArray[np.float64], axis: int = -1) -> Any:
+        return np.mean([spearman(cols[i], cols[j], axis=axis) for i, j in pairs], axis=0)
+
+    rho = float(mean_rho(*columns)) if len(wide) >= 3 else np.nan
+    low, high = bootstrap_ci(columns, mean_rho, rng, paired=True, confidence=confidence,
+                             n_resamples=n_resamples)
+    return pd.Series(dict(rho=rho, ci_low=low, ci_high=high, n_structures=len(wide),
+                          n_seeds=wide.shape[1]))
