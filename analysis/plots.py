@@ -1,0 +1,186 @@
+"""Figures of the paper, redrawn from a robots table and a curves table.
+
+Every function builds a :class:`matplotlib.figure.Figure` on the Agg canvas (no pyplot,
+no global state, no display needed), returns it, and writes a PNG when given ``path``.
+
+* :func:`plot_against_baseline`: fitness per robot in birth order, each method against
+  ``R+R`` (paper Figs. 13–15).
+* :func:`plot_evolution`: fitness of every robot over the evolution with the
+  population's best and mean (Figs. 10, 12).
+* :func:`plot_learning_curves`: mean return during training of selected robots
+  (Figs. 9, 11).
+* :func:`plot_best_so_far`: best fitness found against env steps spent, per run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from analysis.population import best_so_far, population_trace
+from analysis.tables import CURVE_COLUMNS, method_order, require_columns
+
+METHOD_COLORS: dict[str, str] = {
+    "R+R": "tab:blue",  # the paper's colours: blue, yellow, green; E+L ours in red
+    "R+L": "goldenrod",
+    "E+R": "tab:green",
+    "E+L": "tab:red",
+}
+
+
+def new_figure(n_axes: int = 1, *, width: float = 6.4, height: float = 4.0,
+               sharey: bool = False) -> tuple[Figure, list[Axes]]:
+    """A figure with ``n_axes`` side-by-side axes on an Agg canvas."""
+    fig = Figure(figsize=(width * n_axes, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, n_axes, sharey=sharey, squeeze=False)[0]
+    return fig, list(axes)
+
+
+def finish(fig: Figure, path: str | Path | None, dpi: int = 150) -> Figure:
+    """Save ``fig`` as PNG at ``path`` (parents created) when given; return it."""
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=dpi, format="png")
+    return fig
+
+
+def plot_against_baseline(
+    robots: pd.DataFrame,
+    methods: Sequence[str] = ("E+R", "R+L", "E+L"),
+    *,
+    baseline: str = "R+R",
+    value: str = "fitness",
+    path: str | Path | None = None,
+) -> Figure:
+    """Fitness per robot in birth order, one panel per method, each against the baseline.
+
+    Args:
+        robots: Robots table; all seeds of a method are drawn in one colour.
+        methods: Methods to compare, one panel each (paper: Fig. 13 E+R, 14 R+L, 15 E+L).
+        baseline: Method drawn in every panel.
+        value: Column on the y axis.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure, one axes per method, each with two point collections.
+    """
+    require_columns(robots, ("method", "birth", value), "robots table")
+    fig, axes = new_figure(len(methods), width=4.8, sharey=True)
+    for ax, method in zip(axes, methods, strict=True):
+        for m in (baseline, method):
+            rows = robots[robots["method"] == m]
+            ax.scatter(rows["birth"], rows[value], s=12, alpha=0.8, label=m,
+                       color=METHOD_COLORS.get(m))
+        ax.set(title=f"{method} vs {baseline}", xlabel="robot (birth order)")
+        ax.legend(loc="lower right")
+    axes[0].set_ylabel(value)
+    return finish(fig, path)
+
+
+def plot_evolution(
+    robots: pd.DataFrame,
+    run: str | None = None,
+    *,
+    population_size: int = 20,
+    path: str | Path | None = None,
+) -> Figure:
+    """Every robot's fitness over one run, with the population's best and mean after it.
+
+    Args:
+        robots: Robots table.
+        run: Run to draw; None when the table holds a single run.
+        population_size: Initial population size (for the replay).
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes, robots as points (accepted filled, rejected hollow) and
+        two lines, population best and mean.
+
+    Raises:
+        ValueError: If ``run`` is None and the table holds several runs.
+    """
+    require_columns(robots, ("run", "birth", "fitness", "accepted"), "robots table")
+    if run is None:
+        runs = robots["run"].unique()
+        if len(runs) != 1:
+            raise ValueError(f"robots table holds runs {list(runs)}; pass run=")
+        run = str(runs[0])
+    rows = robots[robots["run"] == run].sort_values("birth")
+    trace = population_trace(rows, population_size)
+    fig, (ax,) = new_figure()
+    accepted = rows["accepted"].astype(bool)
+    ax.scatter(rows.loc[accepted, "birth"], rows.loc[accepted, "fitness"], s=14,
+               color="tab:blue", label="accepted")
+    ax.scatter(rows.loc[~accepted, "birth"], rows.loc[~accepted, "fitness"], s=14,
+               facecolors="none", edgecolors="tab:gray", label="rejected")
+    ax.plot(trace["birth"], trace["pop_max"], color="tab:red", label="population best")
+    ax.plot(trace["birth"], trace["pop_mean"], color="tab:orange", label="population mean")
+    ax.set(title=run, xlabel="robot (birth order)", ylabel="fitness")
+    ax.legend(loc="lower right")
+    return finish(fig, path)
+
+
+def plot_learning_curves(
+    curves: pd.DataFrame,
+    names: Sequence[str],
+    run: str | None = None,
+    *,
+    labels: Sequence[str] | None = None,
+    window: int = 1,
+    path: str | Path | None = None,
+) -> Figure:
+    """Mean return during training of selected robots, one line each (Figs. 9, 11).
+
+    Args:
+        curves: Curves table.
+        names: Robots to draw.
+        run: Their run; None to match names in any run.
+        labels: Legend labels, one per name (default: the names).
+        window: Rolling mean over this many informative batches (1: raw).
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes with one line per robot.
+    """
+    require_columns(curves, CURVE_COLUMNS, "curves table")
+    rows = curves if run is None else curves[curves["run"] == run]
+    fig, (ax,) = new_figure()
+    for name, label in zip(names, labels or names, strict=True):
+        curve = rows[rows["name"] == name].dropna(subset=["mean_return"])
+        curve = curve.sort_values("env_steps")
+        smooth = curve["mean_return"].rolling(window, min_periods=1).mean()
+        ax.plot(curve["env_steps"], smooth, label=label)
+    ax.set(xlabel="env steps", ylabel="mean return")
+    ax.legend(fontsize="small")
+    return finish(fig, path)
+
+
+def plot_best_so_far(robots: pd.DataFrame, *, path: str | Path | None = None) -> Figure:
+    """Best fitness so far against env steps spent so far, one line per run.
+
+    Args:
+        robots: Robots table.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes, one step line per run, coloured by method.
+    """
+    trace = best_so_far(robots)
+    fig, (ax,) = new_figure()
+    labelled: set[str] = set()
+    for method in method_order(trace["method"]):
+        for _, rows in trace[trace["method"] == method].groupby("run"):
+            ax.step(rows["env_steps"], rows["best"], where="post",
+                    color=METHOD_COLORS.get(method),
+                    label=None if method in labelled else method)
+            labelled.add(method)
+    ax.set(xlabel="env steps (cumulative)", ylabel="best fitness so far")
+    ax.legend(loc="lower right")
+    return finish(fig, path)
+
