@@ -87,9 +87,11 @@ def bootstrap_ci(
         ``(low, high)``; ``(nan, nan)`` when a sample has fewer than two units.
     """
     arrays = [np.asarray(s, dtype=float) for s in samples]
-    labels = list(units) if units is not None else [None] * len(arrays)
+    labels: list[ArrayLike | None] = [None] * len(arrays) if units is None else list(units)
+    if len(labels) != len(arrays):
+        raise ValueError(f"got {len(arrays)} samples but {len(labels)} unit labellings")
     if paired:
-        labels = [labels[0]]
+        labels = labels[:1]
     if any(_n_units(a, u) < 2 for a, u in zip(arrays, labels, strict=False)):
         return (np.nan, np.nan)
     options: dict[str, Any] = dict(

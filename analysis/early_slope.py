@@ -47,6 +47,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -56,7 +57,7 @@ import scipy.optimize
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.bootstrap import bootstrap_ci, resampling_units
+from analysis.bootstrap import Statistic, bootstrap_ci, resampling_units
 from analysis.population import population_trace
 from analysis.tables import CURVE_COLUMNS, require_columns
 
@@ -404,7 +405,8 @@ def top_recall(prediction: ArrayLike, actual: ArrayLike, share: float = 0.1,
     k = max(1, math.ceil(share * n))
 
     def on_top(v: NDArray[np.float64]) -> NDArray[np.bool_]:
-        return np.argsort(np.argsort(v, axis=-1, kind="stable"), axis=-1) >= n - k
+        ranks = np.argsort(np.argsort(v, axis=-1, kind="stable"), axis=-1)
+        return np.asarray(ranks >= n - k, dtype=bool)
 
     return (on_top(p) & on_top(a)).sum(axis=-1) / k
 
@@ -430,8 +432,9 @@ def rank_metrics(
         Long table ``target``, ``fraction``, ``predictor``, ``metric``, ``estimate``,
         ``ci_low``, ``ci_high``, ``n`` (robots with both a prediction and a target).
     """
-    metrics = {"spearman": spearman, "kendall": kendall,
-               "top_recall": lambda p, a, axis=-1: top_recall(p, a, share, axis)}
+    metrics: dict[str, Statistic] = {
+        "spearman": spearman, "kendall": kendall, "top_recall": partial(top_recall, share=share)
+    }
     rows = []
     for (target, fraction, predictor), group in preds.groupby(
             ["target", "fraction", "predictor"], sort=False):

@@ -22,7 +22,10 @@ evaluated robot with ``run``, ``method``, ``seed``, ``birth``, ``name``, ``budge
   only roughly comparable; the ordering of the methods is what should reproduce.
 
 The std is the sample standard deviation (``ddof=1``); the IQM is the mean of the
-middle 50 % (:func:`scipy.stats.trim_mean` with 25 % cut from each end).
+middle 50 % (:func:`scipy.stats.trim_mean` with 25 % cut from each end). A bootstrap
+interval of the max (and, less so, of the top-k mean) cannot reach above the largest
+robot seen: read it as how stable the estimate is under resampling, not as coverage of
+the best robot a method could find.
 """
 
 from __future__ import annotations

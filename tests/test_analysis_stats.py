@@ -54,10 +54,15 @@ def test_cluster_bootstrap_resamples_whole_clusters() -> None:
 
 
 def test_cluster_bootstrap_handles_unequal_clusters() -> None:
-    x = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 5.0])
-    low, high = bootstrap_ci([x], np.mean, np.random.default_rng(2), units=[[0, 0, 0, 1, 1, 2]],
-                             n_resamples=2000)
-    assert 0.0 <= low < x.mean() < high <= 5.0
+    # Clusters A = [0, 0], B = [1], C = [1]; drawing k copies of A (k ~ Binomial(3, 1/3))
+    # gives the mean (3 - k) / (3 + k): 1, 1/2, 1/5, 0 with P = 8, 12, 6, 1 (/27).
+    # P(0) = 0.037 < 0.05, so the 5 % quantile is 1/5; the 95 % one is 1.
+    x = np.array([0.0, 0.0, 1.0, 1.0])
+    ci = bootstrap_ci([x], np.mean, np.random.default_rng(2), units=[[0, 0, 1, 2]],
+                      confidence=0.90, n_resamples=20_000)
+    assert ci == pytest.approx((0.2, 1.0))
+    with pytest.raises(ValueError, match="unit labellings"):
+        bootstrap_ci([x, x], np.mean, np.random.default_rng(2), units=[None])
 
 
 def test_bootstrap_needs_two_units() -> None:
