@@ -88,10 +88,10 @@ def bootstrap_ci(
     """
     arrays = [np.asarray(s, dtype=float) for s in samples]
     labels: list[ArrayLike | None] = [None] * len(arrays) if units is None else list(units)
-    if len(labels) != len(arrays):
-        raise ValueError(f"got {len(arrays)} samples but {len(labels)} unit labellings")
     if paired:
-        labels = labels[:1]
+        labels = labels[:1]  # one table: its rows share one labelling
+    elif len(labels) != len(arrays):
+        raise ValueError(f"got {len(arrays)} samples but {len(labels)} unit labellings")
     if any(_n_units(a, u) < 2 for a, u in zip(arrays, labels, strict=False)):
         return (np.nan, np.nan)
     options: dict[str, Any] = dict(
