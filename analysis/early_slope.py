@@ -398,6 +398,15 @@ def top_recall(prediction: ArrayLike, actual: ArrayLike, share: float = 0.1,
     """Share of the actual top ``ceil(share·n)`` that the prediction also puts on top.
 
     Ties are broken by position, so duplicates drawn by a bootstrap count separately.
+
+    Args:
+        prediction: Predicted values.
+        actual: Actual values, aligned with ``prediction``.
+        share: Size of the top as a share of the robots (at least one robot).
+        axis: Axis along which robots lie.
+
+    Returns:
+        Recall in [0, 1] (an array when the inputs have more dimensions).
     """
     p = np.moveaxis(np.asarray(prediction, dtype=float), axis, -1)
     a = np.moveaxis(np.asarray(actual, dtype=float), axis, -1)
