@@ -128,7 +128,7 @@ def violations(root: Node, limits: Limits | None = None) -> list[Violation]:
     found: list[Violation] = []
     if root.type is not ModuleType.BRAIN:
         found.append(Violation("root", f"the root must be a brain, not a {root.type.value}"))
-    occupied: dict[tuple[int, int, int], str] = {}
+    occupied: dict[tuple[int, int, int], Placed] = {}
     n_modules, has_motion, too_deep = 0, False, False
     # The walk stops one level below the limit, so a 200-deep chain fails fast.
     for p in walk(root, max_depth=limits.max_depth + 1):
@@ -138,12 +138,11 @@ def violations(root: Node, limits: Limits | None = None) -> list[Violation]:
             too_deep = True
             found.append(Violation(p.label, f"deeper than the limit of {limits.max_depth}"))
         found.extend(Violation(p.label, msg) for msg in _check_children(p))
-        if p.cell in occupied:
+        other = occupied.setdefault(p.cell, p)
+        if other is not p:  # labels are built only for messages: they cost half the check
             found.append(
-                Violation(p.label, f"self-collision: shares cell {p.cell} with {occupied[p.cell]}")
+                Violation(p.label, f"self-collision: shares cell {p.cell} with {other.label}")
             )
-        else:
-            occupied[p.cell] = p.label
     if n_modules > limits.max_modules:
         found.append(
             Violation("root", f"{n_modules} modules, over the limit of {limits.max_modules}")
