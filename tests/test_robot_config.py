@@ -40,7 +40,7 @@ OTHER_SECTIONS: dict[str, tuple[str, str]] = {
 
 def defaulted_groups() -> set[str]:
     """Config groups named in some defaults list (chosen with ``group=option``)."""
-    groups = set()
+    groups: set[str] = set()
     for path in CONF.rglob("*.yaml"):
         doc = OmegaConf.load(path)
         defaults = doc.get("defaults", []) if isinstance(doc, DictConfig) else []
@@ -53,7 +53,7 @@ def defaulted_groups() -> set[str]:
 def every_option() -> list[list[str]]:
     """One override list per option of every config group under conf/."""
     defaulted = defaulted_groups()
-    options = [[]]  # the base config alone
+    options: list[list[str]] = [[]]  # the base config alone
     for path in sorted(CONF.rglob("*.yaml")):
         group = path.parent.relative_to(CONF).as_posix()
         if group == ".":

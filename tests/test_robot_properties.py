@@ -58,7 +58,8 @@ def walk_doc(node: Doc, path: tuple[int, ...] = (), parent: str | None = None) -
 
 
 def edge_doc(root: Doc, path: tuple[int, ...]) -> Doc:
-    node, edge = root, None
+    node: Doc = root
+    edge: Doc | None = None
     for face in path:
         edge = next(e for e in node["children"] if e["face"] == face)
         node = edge["module"]
