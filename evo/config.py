@@ -13,7 +13,7 @@ import typing
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 T = TypeVar("T")
 
@@ -24,8 +24,10 @@ class ConfigError(ValueError):
 
 def _coerce(value: Any, hint: Any, key: str) -> Any:
     """Turn a plain config value into the type a dataclass field declares."""
+    if isinstance(value, DictConfig | ListConfig):
+        value = OmegaConf.to_container(value, resolve=True)
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
-        return typed(hint, value, key)
+        return value if isinstance(value, hint) else typed(hint, value, key)
     origin = typing.get_origin(hint)
     if origin is tuple:
         if not isinstance(value, list | tuple):
@@ -91,3 +93,24 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
         return cls(**kwargs)
     except (ValueError, TypeError) as err:
         raise ConfigError(f"{key}: {err}") from None
+
+
+def instantiate(node: DictConfig, key: str) -> Any:
+    """The object a config node with ``_target_`` describes, built through ``typed``.
+
+    The class comes from ``_target_`` (a dataclass); the other keys are its fields, so
+    mistakes are reported as for ``typed``, naming ``key.field``.
+    """
+    from hydra.utils import get_class
+
+    target = node.get("_target_") if isinstance(node, DictConfig) else None
+    if not isinstance(target, str):
+        raise ConfigError(f"{key}: expected a mapping with a _target_ class")
+    try:
+        cls = get_class(target)
+    except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
+        raise ConfigError(f"{key}._target_: no class {target!r}") from None
+    plain = OmegaConf.to_container(node, resolve=True)
+    assert isinstance(plain, dict)
+    fields = {str(k): v for k, v in plain.items() if k != "_target_"}
+    return typed(cls, fields, key)

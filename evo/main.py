@@ -6,6 +6,8 @@ here and nothing below sees a ``DictConfig``. Outputs go only to the run directo
 
 Tasks (``task=``):
 
+* ``evolve`` (the default): the GA of ``conf/ga``, evaluations on ``conf/executor``;
+  ``resume=<run dir>`` continues a stopped run in its own directory;
 * ``robots``: generate, save and picture random robots;
 * ``train``: train one robot (``robot=FILE``) and evaluate it deterministically;
 * ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``).
@@ -23,8 +25,11 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from evo.config import ConfigError, typed
+from evo.components.ga import Evolve, RandomStructures, StructureStrategy
+from evo.config import ConfigError, instantiate, typed
 from evo.envs.task import EnvConfig
+from evo.evaluation import Job
+from evo.evolution import Evolution, GAConfig
 from evo.learners.common import LearnerConfig
 from evo.robot import (
     GeneratorParams,
@@ -104,7 +109,78 @@ def run_evaluate(cfg: DictConfig, out: Path) -> None:
         raise ConfigError(f"checkpoint: {err}") from None
 
 
+def _strategy(cfg: DictConfig) -> StructureStrategy:
+    generator = typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
+    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
+    g = cfg.ga
+    if g.structure == "R":
+        return RandomStructures(generator, limits)
+    if g.structure != "E":
+        raise ConfigError(f"ga.structure: expected E (evolve) or R (random), got {g.structure!r}")
+    options = {
+        k: g[k] for k in ("crossover_tries", "parent_tries", "mutation_rate", "mutation_operators")
+    }
+    return typed(
+        Evolve,
+        {
+            **options,
+            "generator": generator,
+            "limits": limits,
+            "selection": instantiate(g.selection, "ga.selection"),
+        },
+        "ga",
+    )
+
+
+def run_evolve(cfg: DictConfig, out: Path) -> None:
+    """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues."""
+    from evo.progress import evolution_progress, print_summary
+
+    if cfg.resume is not None:
+        cfg = _resumed_config(Path(str(cfg.resume)))
+    learner = typed(LearnerConfig, cfg.learner, "learner")
+    strategy = _strategy(cfg)
+    ga = typed(GAConfig, {k: cfg.ga[k] for k in ("population_size", "robot_budget")}, "ga")
+    method = f"{strategy.code}+{'L' if learner.update else 'R'}"
+    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method)
+    replacement = instantiate(cfg.ga.replacement, "ga.replacement")
+    schedule = instantiate(cfg.ga.schedule, "ga.schedule")
+    executor = instantiate(cfg.executor, "executor")
+    with evolution_progress(ga.robot_budget, method) as show:
+        evolution = Evolution(
+            out,
+            ga=ga,
+            strategy=strategy,
+            replacement=replacement,
+            schedule=schedule,
+            job=job,
+            executor=executor,
+            seed=int(cfg.seed),
+            on_result=show,
+        )
+        if (out / "state.json").exists():
+            try:
+                evolution.resume()
+            except ValueError as err:
+                raise ConfigError(f"resume: {err}") from None
+            show.resumed(evolution.history)
+        summary = evolution.run()
+    print_summary(summary, out)
+
+
+def _resumed_config(run_dir: Path) -> DictConfig:
+    """The resolved config a run directory was started with."""
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
+    loaded = OmegaConf.load(path)
+    assert isinstance(loaded, DictConfig)
+    loaded.resume = None
+    return loaded
+
+
 TASKS: dict[str, Callable[[DictConfig, Path], None]] = {
+    "evolve": run_evolve,
     "robots": run_robots,
     "train": run_train,
     "evaluate": run_evaluate,
@@ -123,12 +199,23 @@ def main(cfg: DictConfig) -> None:
         if not isinstance(threads, int) or threads < 1:
             raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
         torch.set_num_threads(threads)
-        (out / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+        if cfg.resume is None:
+            (out / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
         task(cfg, out)
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)
         sys.exit(2)
 
 
+def _resume_in_place(argv: list[str]) -> list[str]:
+    """``resume=DIR`` runs in DIR itself: Hydra writes nothing anywhere else."""
+    for arg in argv:
+        if arg.startswith("resume=") and arg != "resume=null":
+            run_dir = arg.split("=", 1)[1]
+            return [*argv, f"hydra.run.dir={run_dir}", "hydra.output_subdir=null"]
+    return argv
+
+
 if __name__ == "__main__":
+    sys.argv = _resume_in_place(sys.argv)
     main()

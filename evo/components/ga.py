@@ -1,0 +1,230 @@
+"""The genetic algorithm's parts (paper section 6), each a small Hydra-instantiable piece.
+
+* ``Roulette``: fitness-proportional selection (paper Eq. 9). Fitness may be negative, so
+  probabilities use fitness shifted by the population minimum plus ``epsilon``
+  (SPEC decision): ``p_i = (f_i - min f + eps) / sum_j (f_j - min f + eps)``. The worst
+  member keeps a small chance ``eps / sum``; with all-equal fitness selection is uniform.
+* ``ReplaceWorst``: steady-state replacement: the offspring replaces the worst member
+  only if it is strictly fitter.
+* ``BudgetSchedule``: training budget per evaluation: ``initial`` env steps for the
+  initial robots, then rising linearly from ``first`` for the first offspring to
+  ``last`` for the last one (paper section 7: 50k -> 250k).
+* ``Evolve`` (structure strategy ``E``): two parents by selection, one offspring by
+  subtree crossover (optionally mutated). ``RandomStructures`` (``R``): every new robot is
+  a fresh random structure, no parents.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from evo.robot.operators import (
+    MUTATIONS,
+    GeneratorParams,
+    OperatorError,
+    crossover,
+    mutate,
+    random_robot,
+)
+from evo.robot.tree import Robot
+from evo.robot.validate import Limits
+
+
+@dataclass(frozen=True, slots=True)
+class Member:
+    """One evaluated robot in the population."""
+
+    name: str
+    robot: Robot
+    fitness: float
+
+
+# ---- selection ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Roulette:
+    """Roulette-wheel selection on fitness shifted by the minimum plus ``epsilon``.
+
+    Attributes:
+        epsilon: Added to every shifted fitness so the worst member can still be picked
+            and all-equal fitness gives uniform selection (fitness units).
+        distinct: Draw the two parents without replacement.
+    """
+
+    epsilon: float = 0.01
+    distinct: bool = True
+
+    def __post_init__(self) -> None:
+        if self.epsilon <= 0:
+            raise ValueError(f"epsilon must be positive, got {self.epsilon}")
+
+    def probabilities(self, fitness: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """Selection probability of every member (paper Eq. 9 on shifted fitness)."""
+        f = np.asarray(fitness, dtype=np.float64)
+        if f.size == 0 or not np.isfinite(f).all():
+            raise ValueError(f"selection needs finite fitness values, got {f.tolist()}")
+        shifted = f - f.min() + self.epsilon
+        probabilities: npt.NDArray[np.float64] = shifted / shifted.sum()
+        return probabilities
+
+    def select(self, fitness: npt.ArrayLike, rng: np.random.Generator, k: int = 2) -> list[int]:
+        """Indices of ``k`` parents."""
+        p = self.probabilities(fitness)
+        replace = not self.distinct or len(p) < k
+        return [int(i) for i in rng.choice(len(p), size=k, replace=replace, p=p)]
+
+
+# ---- replacement ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class ReplaceWorst:
+    """Steady-state replacement: the offspring replaces the worst member if fitter."""
+
+    def apply(self, population: list[Member], offspring: Member) -> Member | None:
+        """Replace in place; returns the member that left, or None when rejected."""
+        if not math.isfinite(offspring.fitness) or not population:
+            return None
+        worst = min(range(len(population)), key=lambda i: population[i].fitness)
+        if offspring.fitness > population[worst].fitness:
+            gone = population[worst]
+            population[worst] = offspring
+            return gone
+        return None
+
+
+# ---- budget schedule ------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class BudgetSchedule:
+    """Env steps of training per evaluation.
+
+    Attributes:
+        initial: Budget of every robot of the initial population, env steps.
+        first: Budget of the first offspring, env steps.
+        last: Budget of the last offspring, env steps (linear in between).
+    """
+
+    initial: int = 50_000
+    first: int = 50_000
+    last: int = 250_000
+
+    def __post_init__(self) -> None:
+        for key in ("initial", "first", "last"):
+            if getattr(self, key) < 1:
+                raise ValueError(f"{key} must be >= 1 env step, got {getattr(self, key)}")
+
+    def budget(self, birth: int, population_size: int, robot_budget: int) -> int:
+        """Budget of the robot born ``birth``-th (0-based) in a run of ``robot_budget``."""
+        if birth < population_size:
+            return self.initial
+        offspring = robot_budget - population_size
+        if offspring <= 1:
+            return self.last
+        frac = (birth - population_size) / (offspring - 1)
+        return round(self.first + (self.last - self.first) * min(frac, 1.0))
+
+
+# ---- structure strategies -------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Offspring:
+    """A new robot and where it came from."""
+
+    robot: Robot
+    parents: tuple[str, ...] = ()
+    operator: str = "random"
+
+
+class StructureStrategy(Protocol):
+    """Makes the next robot to evaluate from the population as it stands."""
+
+    @property
+    def code(self) -> str:
+        """``E`` or ``R``: the strategy's letter in the method name."""
+
+    def initial(self, rng: np.random.Generator) -> Offspring: ...
+
+    def breed(self, population: Sequence[Member], rng: np.random.Generator) -> Offspring: ...
+
+
+@dataclass(frozen=True, slots=True)
+class RandomStructures:
+    """Structure strategy ``R``: every robot is a fresh random structure."""
+
+    generator: GeneratorParams = field(default_factory=GeneratorParams)
+    limits: Limits = field(default_factory=Limits)
+    code: str = "R"
+
+    def initial(self, rng: np.random.Generator) -> Offspring:
+        return Offspring(random_robot(rng, self.generator, self.limits))
+
+    def breed(self, population: Sequence[Member], rng: np.random.Generator) -> Offspring:
+        return self.initial(rng)
+
+
+@dataclass(frozen=True, slots=True)
+class Evolve:
+    """Structure strategy ``E``: crossover of two selected parents (paper section 6).
+
+    Attributes:
+        selection: How parents are chosen.
+        generator: Random generation (initial population, mutation's new subtrees).
+        limits: Size limits of valid robots.
+        crossover_tries: Swaps tried per parent pair before a new pair is drawn.
+        parent_tries: Parent pairs tried before giving up.
+        mutation_rate: Probability the offspring is also mutated (0 in the paper).
+        mutation_operators: Which mutation operators may be used.
+    """
+
+    selection: Roulette = field(default_factory=Roulette)
+    generator: GeneratorParams = field(default_factory=GeneratorParams)
+    limits: Limits = field(default_factory=Limits)
+    crossover_tries: int = 100
+    parent_tries: int = 20
+    mutation_rate: float = 0.0
+    mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
+    code: str = "E"
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.mutation_rate <= 1:
+            raise ValueError(f"mutation_rate must be in [0, 1], got {self.mutation_rate}")
+        unknown = set(self.mutation_operators) - set(MUTATIONS)
+        if unknown:
+            raise ValueError(
+                f"unknown mutation operators {sorted(unknown)}; "
+                f"expected some of {sorted(MUTATIONS)}"
+            )
+
+    def initial(self, rng: np.random.Generator) -> Offspring:
+        return Offspring(random_robot(rng, self.generator, self.limits))
+
+    def breed(self, population: Sequence[Member], rng: np.random.Generator) -> Offspring:
+        fitness = [m.fitness for m in population]
+        for _ in range(self.parent_tries):
+            i, j = self.selection.select(fitness, rng)
+            a, b = population[i], population[j]
+            try:
+                result = crossover(a.robot, b.robot, rng, self.limits, self.crossover_tries)
+            except OperatorError:
+                continue
+            # A swap of identical subtrees gives a parent back: not a new robot.
+            novel = [c for c in result.offspring if c not in (a.robot, b.robot)]
+            if not novel:
+                continue
+            child = novel[int(rng.integers(len(novel)))]
+            operator = "crossover"
+            if self.mutation_rate and rng.random() < self.mutation_rate:
+                child = mutate(child, rng, self.mutation_operators, self.generator, self.limits)
+                operator = "crossover+mutation"
+            return Offspring(child, (a.name, b.name), operator)
+        raise OperatorError(f"no valid offspring from {self.parent_tries} parent pairs")

@@ -1,0 +1,276 @@
+"""The evolution loop (paper section 6): a steady-state GA over robot structures.
+
+Read ``Evolution.run`` top to bottom: keep every worker busy with an evaluation (an
+initial random robot while the population is not full, then an offspring bred from the
+population as it stands), and whenever one finishes, apply steady-state replacement,
+record it, and save the state. Stop once ``robot_budget`` robots have been evaluated.
+With one worker this is the paper's loop; with more it is an asynchronous steady state.
+
+Resumable: the whole state (population, history, breeding RNG, next birth, robots in
+flight) is written atomically to ``state.json`` after every submission and every
+result, before anything else. ``Evolution.resume`` reloads it: finished robots are
+never evaluated again, robots in flight when the run stopped are evaluated again with
+their own seed, so a serial run interrupted and resumed gives the same history.
+
+Run directory: ``config.yaml`` (resolved), ``state.json``, ``history.csv`` (one row per
+evaluated robot), ``population.json``, ``summary.json``, ``robots/<name>.json``,
+``evals/<name>.pt`` (policy) and ``evals/<name>.csv`` (learning curve).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from evo.components.executors import EvalExecutor
+from evo.components.ga import BudgetSchedule, Member, ReplaceWorst, StructureStrategy
+from evo.evaluation import Job, Outcome, Task, evaluate
+from evo.learners.session import write_json
+from evo.robot.io import load_robot, save_robot
+
+STATE_VERSION = 1
+
+
+@dataclass(frozen=True, slots=True)
+class GAConfig:
+    """Sizes of the run.
+
+    Attributes:
+        population_size: Robots in the population (the initial ones are random).
+        robot_budget: Robots evaluated in all, initial ones included.
+    """
+
+    population_size: int = 20
+    robot_budget: int = 100
+
+    def __post_init__(self) -> None:
+        if self.population_size < 2:
+            raise ValueError(f"population_size must be >= 2, got {self.population_size}")
+        if self.robot_budget < self.population_size:
+            raise ValueError(
+                f"robot_budget ({self.robot_budget}) must be >= population_size "
+                f"({self.population_size})"
+            )
+
+
+def evaluation_seed(seed: int, birth: int) -> int:
+    """The seed of the ``birth``-th evaluation, independent of evaluation order."""
+    return int(np.random.SeedSequence(seed, spawn_key=(birth,)).generate_state(1)[0])
+
+
+class Evolution:
+    """One GA run in ``run_dir``; see the module docstring."""
+
+    def __init__(
+        self,
+        run_dir: Path,
+        *,
+        ga: GAConfig,
+        strategy: StructureStrategy,
+        replacement: ReplaceWorst,
+        schedule: BudgetSchedule,
+        job: Job,
+        executor: EvalExecutor,
+        seed: int,
+        on_result: Callable[[dict[str, Any]], None] | None = None,
+    ) -> None:
+        self.run_dir, self.ga, self.strategy = run_dir, ga, strategy
+        self.replacement, self.schedule, self.job = replacement, schedule, job
+        self.executor, self.seed, self.on_result = executor, seed, on_result
+        self.rng = np.random.default_rng(seed)
+        self.population: list[Member] = []
+        self.history: list[dict[str, Any]] = []
+        self.pending: list[Task] = []  # submitted, not yet recorded
+        self.next_birth = 0
+        self.wall_before = 0.0
+        self.started = time.perf_counter()
+        (run_dir / "robots").mkdir(parents=True, exist_ok=True)
+
+    # ---- the loop -------------------------------------------------------------------------
+    def run(self) -> dict[str, Any]:
+        """Evaluate robots until the budget is spent; returns the summary."""
+        running: dict[Future[Outcome], Task] = {}
+        for task in self.pending:  # in flight when a previous session stopped
+            running[self.executor.submit(evaluate, task, self.job)] = task
+        try:
+            while True:
+                while len(running) < self.executor.workers and self._can_submit(running):
+                    task = self._next_task(running)
+                    self.pending.append(task)
+                    self._save()
+                    running[self.executor.submit(evaluate, task, self.job)] = task
+                if not running:
+                    break
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    task = running.pop(future)
+                    self._record(task, self._outcome(future, task))
+        finally:
+            self.executor.shutdown()
+        return self.summary()
+
+    def _can_submit(self, running: dict[Future[Outcome], Task]) -> bool:
+        if self.next_birth >= self.ga.robot_budget:
+            return False
+        if len(self.population) >= self.ga.population_size:
+            return True
+        initial_running = sum(1 for t in running.values() if not t.parents)
+        return len(self.population) + initial_running < self.ga.population_size
+
+    def _next_task(self, running: dict[Future[Outcome], Task]) -> Task:
+        """Breed (or draw) the next robot and give it a unique name, budget and seed."""
+        birth = self.next_birth
+        if len(self.population) < self.ga.population_size:
+            offspring = self.strategy.initial(self.rng)
+        else:
+            offspring = self.strategy.breed(self.population, self.rng)
+        taken = {row["name"] for row in self.history} | {t.name for t in self.pending}
+        name = (
+            offspring.robot.name
+            if offspring.robot.name not in taken
+            else (f"{offspring.robot.name}-{birth}")
+        )
+        save_robot(offspring.robot, self.run_dir / "robots" / f"{name}.json")
+        self.next_birth += 1
+        budget = self.schedule.budget(birth, self.ga.population_size, self.ga.robot_budget)
+        return Task(
+            birth,
+            name,
+            offspring.robot.canonical_json(),
+            budget,
+            evaluation_seed(self.seed, birth),
+            offspring.parents,
+            offspring.operator,
+        )
+
+    def _outcome(self, future: Future[Outcome], task: Task) -> Outcome:
+        """The evaluation's outcome; a crashed worker becomes a recorded error."""
+        try:
+            return future.result()
+        except BrokenProcessPool:
+            self.executor.restart()
+            return Outcome(task.birth, task.name, error="the worker process died")
+        except Exception as err:  # noqa: BLE001 - recorded, the run goes on
+            return Outcome(task.birth, task.name, error=f"{type(err).__name__}: {err}")
+
+    def _record(self, task: Task, outcome: Outcome) -> None:
+        """Apply replacement, append the history row, save the state."""
+        accepted, replaced = False, ""
+        if outcome.error is None and math.isfinite(outcome.fitness):
+            member = Member(task.name, load_robot(self._robot_path(task.name)), outcome.fitness)
+            if not task.parents and len(self.population) < self.ga.population_size:
+                self.population.append(member)
+                accepted = True
+            else:
+                gone = self.replacement.apply(self.population, member)
+                accepted, replaced = gone is not None, gone.name if gone else ""
+        fitness = [m.fitness for m in self.population]
+        row = {
+            "birth": task.birth,
+            "name": task.name,
+            "method": self.job.method,
+            "parents": ";".join(task.parents),
+            "operator": task.operator,
+            "budget": task.budget,
+            "seed": task.seed,
+            "fitness": outcome.fitness,
+            "accepted": accepted,
+            "replaced": replaced,
+            "env_steps": outcome.env_steps,
+            "episodes": outcome.episodes,
+            "wall_seconds": outcome.wall_seconds,
+            "error": outcome.error or "",
+            "population_best": max(fitness) if fitness else math.nan,
+            "population_mean": float(np.mean(fitness)) if fitness else math.nan,
+        }
+        self.history.append(row)
+        self.pending = [t for t in self.pending if t.birth != task.birth]
+        self._save()
+        if self.on_result is not None:
+            self.on_result(row)
+
+    def _robot_path(self, name: str) -> Path:
+        return self.run_dir / "robots" / f"{name}.json"
+
+    # ---- state ----------------------------------------------------------------------------
+    def _save(self) -> None:
+        """Write the state first (atomically), then the files derived from it."""
+        state = {
+            "version": STATE_VERSION,
+            "seed": self.seed,
+            "next_birth": self.next_birth,
+            "rng": self.rng.bit_generator.state,
+            "population": [{"name": m.name, "fitness": m.fitness} for m in self.population],
+            "history": self.history,
+            "pending": [asdict(t) for t in self.pending],
+            "wall_seconds": self.wall_seconds,
+        }
+        write_json(self.run_dir / "state.json", state)
+        if self.history:
+            tmp = self.run_dir / "history.csv.tmp"
+            pd.DataFrame(self.history).to_csv(tmp, index=False)
+            tmp.replace(self.run_dir / "history.csv")
+        write_json(self.run_dir / "population.json", {"population": state["population"]})
+        write_json(self.run_dir / "summary.json", self.summary())
+
+    @property
+    def wall_seconds(self) -> float:
+        """Wall time over every session of this run."""
+        return self.wall_before + time.perf_counter() - self.started
+
+    def resume(self) -> None:
+        """Load ``state.json`` from the run directory (see the module docstring)."""
+        path = self.run_dir / "state.json"
+        try:
+            state = json.loads(path.read_text())
+            if state.get("version") != STATE_VERSION:
+                raise ValueError(
+                    f"state version {state.get('version')!r}, expected {STATE_VERSION}"
+                )
+            self.seed = int(state["seed"])
+            self.next_birth = int(state["next_birth"])
+            self.rng.bit_generator.state = state["rng"]
+            self.history = list(state["history"])
+            self.pending = [Task(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
+            self.population = [
+                Member(m["name"], load_robot(self._robot_path(m["name"])), float(m["fitness"]))
+                for m in state["population"]
+            ]
+            self.wall_before = float(state["wall_seconds"])
+        except FileNotFoundError:
+            raise ValueError(f"{path}: no saved state; is this an evo run directory?") from None
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{path}: unreadable run state ({err})") from None
+
+    def summary(self) -> dict[str, Any]:
+        """Robots evaluated, the best robot, env steps and speed so far."""
+        done = [r for r in self.history if not r["error"]]
+        best = max(done, key=lambda r: r["fitness"], default=None)
+        initial = [r["fitness"] for r in done if not r["parents"]]
+        steps = int(sum(r["env_steps"] for r in self.history))
+        return {
+            "method": self.job.method,
+            "robots_evaluated": len(self.history),
+            "robot_budget": self.ga.robot_budget,
+            "failed": len(self.history) - len(done),
+            "best_robot": best["name"] if best else None,
+            "best_fitness": best["fitness"] if best else None,
+            "best_initial_fitness": max(initial) if initial else None,
+            "accept_rate": float(np.mean([r["accepted"] for r in self.history if r["parents"]]))
+            if any(r["parents"] for r in self.history)
+            else None,
+            "env_steps": steps,
+            "wall_seconds": self.wall_seconds,
+            "steps_per_second": steps / max(self.wall_seconds, 1e-9),
+            "complete": len(self.history) >= self.ga.robot_budget,
+        }
