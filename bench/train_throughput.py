@@ -1,0 +1,94 @@
+"""End-to-end PPO throughput, with its time split, against the raw physics rate.
+
+For every example robot and arena this trains PPO with the default learner config
+(``conf/learner/ppo.yaml``) for ``--steps`` env steps on ``--nthread`` physics threads
+and prints, from the same run:
+
+* env steps/s end to end (collection + GAE + update + curve bookkeeping);
+* the split of wall time: physics (inside ``mujoco.rollout``), env (the rest of the
+  environment's step: observations, rewards, TensorDicts), policy and collector (the
+  rest of collection), update (GAE, PPO epochs, statistics);
+* the raw physics rate of the same compiled model, N arenas, same threads and frame
+  skip (``bench/env_throughput.py``'s ``raw_rate``) and the ratio.
+
+With ``--quality`` it also evaluates the trained policy deterministically (20 episodes)
+and prints the success rate: use ``--steps 150000`` for the learning-quality figures.
+
+Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots ...]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import glob
+from pathlib import Path
+
+import numpy as np
+import torch
+from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
+from rich.console import Console
+from rich.table import Table
+
+from evo.envs.gym_env import arena_params
+from evo.envs.reach import make_env
+from evo.envs.task import EnvConfig
+from evo.learners.common import LearnerConfig
+from evo.learners.ppo import evaluate, train
+from evo.robot import load_robot
+from evo.robot.builder import PhysicsParams
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=30_000, help="training budget, env steps")
+    parser.add_argument("--robots", nargs="+", default=sorted(glob.glob("robots/*.json")))
+    parser.add_argument("--arenas", nargs="+", default=["clean", "cluttered"])
+    parser.add_argument("--nthread", type=int, default=2, help="physics threads")
+    parser.add_argument("--num-envs", type=int, default=None, help="override learner.num_envs")
+    parser.add_argument("--quality", action="store_true", help="also evaluate success rate")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    config = LearnerConfig()
+    if args.num_envs:
+        config = dataclasses.replace(config, num_envs=args.num_envs)
+    physics = PhysicsParams()
+    table = Table(title=f"PPO end to end, {args.steps:,} env steps, {config.num_envs} arenas, "
+                  f"{args.nthread} physics threads")
+    columns = ["robot", "arena", "steps/s", "physics", "env", "policy+collector", "update",
+               "raw physics", "ratio", "fitness"]
+    if args.quality:
+        columns.append("eval success")
+    for column in columns:
+        table.add_column(column, justify="right")
+    for path in args.robots:
+        robot = load_robot(path)
+        for arena in args.arenas:
+            env = EnvConfig(name=arena, nthread=args.nthread, arena=arena_params(arena))
+            probe = make_env(robot, physics, env, config.num_envs, args.seed)
+            probe.reset()
+            raw = raw_rate(probe, 100, np.random.default_rng(0))
+            result = train(robot, physics=physics, env=env, config=config, budget=args.steps,
+                           seed=args.seed)
+            t, wall = result.timing, result.wall_seconds
+            split = {
+                "physics": t["physics"],
+                "env": t["env"] - t["physics"],
+                "policy+collector": t["collect"] - t["env"],
+                "update": t["update"],
+            }
+            row = [Path(path).stem, arena, f"{result.steps_per_second:,.0f}"]
+            row += [f"{v / wall:.0%}" for v in split.values()]
+            row += [f"{raw:,.0f}", f"{result.steps_per_second / raw:.2f}", f"{result.fitness:+.3f}"]
+            if args.quality:
+                ev = evaluate(robot, result.policy, physics=physics, env=env, episodes=20,
+                              seed=args.seed + 1)
+                row.append(f"{ev['success_rate']:.0%}")
+            table.add_row(*row)
+            print(f"{Path(path).stem} {arena}: {result.steps_per_second:,.0f} steps/s", flush=True)
+    Console().print(table)
+
+
+if __name__ == "__main__":
+    main()
