@@ -85,8 +85,8 @@ def touching(model: mujoco.MjModel, data: mujoco.MjData, moving: set[int]) -> bo
 def test_random_robots_compile_and_come_to_rest_on_the_floor() -> None:
     at_rest, still_moving = 0, []
     for robot in robots(0, SETTLE_ROBOTS):
-        built = build(robot)
-        model = built.compile()
+        model = build(robot).compile()
+        assert model.nu == robot.n_motors + robot.n_pivots, robot.name
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
         # Dropped from just above the floor: nothing touches anything at the start.
