@@ -68,8 +68,15 @@ def run_robots(cfg: DictConfig, out: Path) -> None:
     if count < 1:
         raise ConfigError(f"robots.count: expected a positive integer, got {count}")
     rng = np.random.default_rng(int(cfg.seed))
-    robots = [random_robot(rng, params, limits) for _ in range(count)]
-    write_gallery(robots, out / "robots", _physics(cfg), bool(cfg.robots.render))
+    robots: dict[str, Robot] = {}
+    for _ in range(100 * count):  # distinct structures, as many as asked
+        robot = random_robot(rng, params, limits)
+        robots.setdefault(robot.name, robot)
+        if len(robots) == count:
+            break
+    else:
+        raise ConfigError(f"robots.count: only {len(robots)} distinct robots at these settings")
+    write_gallery(list(robots.values()), out / "robots", _physics(cfg), bool(cfg.robots.render))
 
 
 def run_train(cfg: DictConfig, out: Path) -> None:

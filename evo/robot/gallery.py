@@ -35,6 +35,29 @@ def size_table(robots: Sequence[Robot]) -> Table:
     return table
 
 
+def contact_sheet(robots: Sequence[Robot], params: PhysicsParams, path: Path) -> Path:
+    """A grid of offscreen pictures of ``robots`` saved as ``path`` (PNG).
+
+    Raises:
+        RenderError: no OpenGL backend works (set ``MUJOCO_GL=egl``).
+    """
+    from evo.robot.render import render_image
+
+    images = [render_image(robot, 320, 240, params) for robot in robots]
+    cols = min(4, len(images))
+    rows = -(-len(images) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, robot, image in zip(axes.flat, robots, images, strict=False):
+        ax.imshow(image)
+        ax.set_title(f"{robot.name}  m={robot.n_motors} n={robot.n_pivots}", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 def write_gallery(
     robots: Sequence[Robot],
     out: Path,
@@ -52,25 +75,12 @@ def write_gallery(
     written = [save_robot(robot, out / f"{robot.name}.json") for robot in robots]
     console.print(size_table(robots))
     if render:
-        from evo.robot.render import RenderError, render_image
+        from evo.robot.render import RenderError
 
         try:
-            images = [render_image(robot, 320, 240, params) for robot in robots]
+            written.append(contact_sheet(robots, params, out / "robots.png"))
         except RenderError as err:
             console.print(f"[yellow]no pictures: {err}[/yellow]")
             return written
-        cols = min(4, len(images))
-        rows = -(-len(images) // cols)
-        fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
-        for ax in axes.flat:
-            ax.axis("off")
-        for ax, robot, image in zip(axes.flat, robots, images, strict=False):
-            ax.imshow(image)
-            ax.set_title(f"{robot.name}  m={robot.n_motors} n={robot.n_pivots}", fontsize=8)
-        fig.tight_layout()
-        sheet = out / "robots.png"
-        fig.savefig(sheet, dpi=100)
-        plt.close(fig)
-        written.append(sheet)
-        console.print(f"contact sheet: {sheet}")
+        console.print(f"contact sheet: {written[-1]}")
     return written

@@ -1,0 +1,159 @@
+"""Replay saved robots: ``python -m evo.replay``.
+
+* ``python -m evo.replay RUN_DIR ROBOT_NAME [--episodes K] [--seed S] [--video out.mp4]
+  [--rrd out.rrd]``: reload the robot's trained policy, re-simulate K deterministic
+  episodes and write a video (MuJoCo offscreen rendering, ``MUJOCO_GL=egl``) and/or a
+  rerun recording. The same seed gives the same episodes as the recording made after
+  training (its seed is in the evaluation's metadata).
+* ``python -m evo.replay --gallery RUN_DIR [--top N] [--out robots.png]``: a picture of
+  the run's best robots.
+
+RUN_DIR is a run directory of ``task=evolve`` (robots/<name>.json, evals/<name>.pt) or
+of ``task=train`` (robot.json, policy.pt; ROBOT_NAME may then be omitted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pandas as pd
+from omegaconf import OmegaConf
+
+from evo.config import ConfigError, typed
+from evo.envs.task import EnvConfig
+from evo.learners.common import load_checkpoint
+from evo.learners.rollouts import Played, play
+from evo.robot.builder import PhysicsParams
+from evo.robot.io import RobotFileError, load_robot
+from evo.robot.render import RenderError, make_renderer
+from evo.robot.tree import Robot
+from evo.robot.validate import InvalidRobotError
+
+
+def _run_config(run_dir: Path) -> tuple[PhysicsParams, EnvConfig]:
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise ValueError(f"{path} not found; is {run_dir} an evo run directory?")
+    cfg = OmegaConf.load(path)
+    physics = typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
+    return physics, typed(EnvConfig, cfg.env, "env")
+
+
+def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
+    """The robot and its policy checkpoint, in either run-directory layout."""
+    if name is None:
+        robot_path, policy_path = run_dir / "robot.json", run_dir / "policy.pt"
+    else:
+        robot_path, policy_path = (
+            run_dir / "robots" / f"{name}.json",
+            run_dir / "evals" / f"{name}.pt",
+        )
+        if not robot_path.exists() and (run_dir / "robot.json").exists():
+            robot_path, policy_path = run_dir / "robot.json", run_dir / "policy.pt"
+    if not robot_path.exists():
+        raise ValueError(f"{robot_path} not found: no robot {name!r} in {run_dir}")
+    return load_robot(robot_path), policy_path
+
+
+def write_video(
+    model: mujoco.MjModel,
+    episodes: Sequence[Played],
+    path: Path,
+    width: int = 640,
+    height: int = 480,
+    fps: int = 20,
+) -> Path:
+    """Render every frame of ``episodes`` and encode them (mp4 via ffmpeg, or gif)."""
+    import imageio.v2 as imageio
+
+    renderer = make_renderer(model, width, height)
+    data = mujoco.MjData(model)
+    target_body = model.body("target").mocapid[0]
+    camera = mujoco.MjvCamera()
+    camera.azimuth, camera.elevation = 135.0, -40.0
+    try:
+        with imageio.get_writer(path, fps=fps) as writer:
+            for episode in episodes:
+                centre = (episode.xpos[0, model.body("brain").id] + episode.target) / 2
+                camera.lookat[:] = centre
+                camera.distance = 1.0 + float(np.linalg.norm(episode.target[:2] - centre[:2])) * 2
+                for qpos in episode.qpos:
+                    data.qpos[:] = qpos
+                    data.mocap_pos[target_body] = episode.target
+                    mujoco.mj_kinematics(model, data)
+                    renderer.update_scene(data, camera=camera)
+                    writer.append_data(renderer.render())  # type: ignore[attr-defined]
+    finally:
+        renderer.close()
+    return path
+
+
+def replay(
+    run_dir: Path, name: str | None, episodes: int, seed: int, video: Path | None, rrd: Path | None
+) -> list[Played]:
+    """Re-simulate ``episodes`` deterministic episodes and write the requested files."""
+    physics, env = _run_config(run_dir)
+    robot, policy_path = _files(run_dir, name)
+    policy = load_checkpoint(policy_path)
+    core, played = play(robot, policy, physics=physics, env=env, seed=seed, episodes=episodes)
+    for i, episode in enumerate(played):
+        print(
+            f"episode {i}: {len(episode.time) - 1} steps, return {episode.total_return:+.4f}, "
+            f"{'success' if episode.success else 'no success'}"
+        )
+    if video is not None:
+        print(f"video: {write_video(core.model, played, video)}")
+    if rrd is not None:
+        from evo.record.replay import write_replay_rrd
+
+        print(f"rerun: {write_replay_rrd(core.model, robot, played, rrd)}")
+    return played
+
+
+def gallery(run_dir: Path, top: int, out: Path) -> Path:
+    """A contact sheet of the ``top`` fittest robots of a run."""
+    from evo.robot.gallery import contact_sheet
+
+    history = run_dir / "history.csv"
+    if not history.is_file():
+        raise ValueError(f"{history} not found; is {run_dir} an evolution run directory?")
+    rows = pd.read_csv(history).dropna(subset=["fitness"]).nlargest(top, "fitness")
+    robots = [load_robot(run_dir / "robots" / f"{n}.json") for n in rows["name"]]
+    physics, _ = _run_config(run_dir)
+    return contact_sheet(robots, physics, out)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m evo.replay",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("name", nargs="?", help="robot name (omit for a task=train run)")
+    parser.add_argument("--episodes", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--video", type=Path)
+    parser.add_argument("--rrd", type=Path)
+    parser.add_argument("--gallery", action="store_true", help="picture the best robots")
+    parser.add_argument("--top", type=int, default=8)
+    parser.add_argument("--out", type=Path, help="gallery picture (default RUN_DIR/best.png)")
+    args = parser.parse_args(argv)
+    try:
+        if args.gallery:
+            print(gallery(args.run_dir, args.top, args.out or args.run_dir / "best.png"))
+        else:
+            replay(args.run_dir, args.name, args.episodes, args.seed, args.video, args.rrd)
+    except (ValueError, ConfigError, RobotFileError, InvalidRobotError, RenderError) as err:
+        print(f"replay: {err}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
