@@ -1,0 +1,127 @@
+"""What to record (``conf/record/*.yaml``) and the choice of episodes.
+
+This module stays light (no rerun or foxglove import) so the environment and the
+learner can call ``should_record`` for every finished episode at no cost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import mujoco
+
+    from evo.record.base import Recorder
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeChoice:
+    """Which episodes of an evaluation are recorded.
+
+    Attributes:
+        first: Record the first episode (index 0).
+        last: Record the last episode.
+        every: Also record episodes 0, k, 2k, ... (0 = none of these).
+    """
+
+    first: bool = True
+    last: bool = True
+    every: int = 50
+
+    def __post_init__(self) -> None:
+        if self.every < 0:
+            raise ValueError(f"every must be >= 0 (0 = off), got {self.every}")
+
+
+@dataclass(frozen=True, slots=True)
+class RecordConfig:
+    """One ``conf/record/*.yaml``.
+
+    Attributes:
+        mcap: Write MCAP files (``evals/<robot>.mcap``, ``run.mcap``).
+        rerun: Write rerun files (``evals/<robot>.rrd``, ``run.rrd``).
+        episodes: Which episodes to record.
+        frame_stride: Keep every n-th control step of a recorded episode.
+        flush_every: Flush the files every n learning-curve rows.
+    """
+
+    mcap: bool = True
+    rerun: bool = True
+    episodes: EpisodeChoice = field(default_factory=EpisodeChoice)
+    frame_stride: int = 1
+    flush_every: int = 5
+
+    def __post_init__(self) -> None:
+        if self.frame_stride < 1:
+            raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
+        if self.flush_every < 1:
+            raise ValueError(f"flush_every must be >= 1, got {self.flush_every}")
+
+    @property
+    def enabled(self) -> bool:
+        """Whether any file is written."""
+        return self.mcap or self.rerun
+
+
+def should_record(config: RecordConfig, episode_index: int, is_last: bool) -> bool:
+    """Whether episode ``episode_index`` (0-based) of an evaluation is recorded.
+
+    Args:
+        config: The record config.
+        episode_index: The episode's number within the evaluation.
+        is_last: Whether it is the evaluation's last episode.
+    """
+    if not config.enabled:
+        return False
+    choice = config.episodes
+    return (
+        (choice.first and episode_index == 0)
+        or (choice.last and is_last)
+        or (choice.every > 0 and episode_index % choice.every == 0)
+    )
+
+
+def open_recorder(
+    config: RecordConfig,
+    directory: str | Path,
+    name: str,
+    model: mujoco.MjModel,
+    metadata: Mapping[str, Any],
+) -> Recorder:
+    """The recorder of one evaluation: ``directory/<name>.mcap`` and/or ``.rrd``.
+
+    Args:
+        config: What to write.
+        directory: Folder of the evaluation files (``<run>/evals``).
+        name: The robot's name; the files are named after it.
+        model: The compiled model of the whole scene.
+        metadata: Robot JSON, resolved config, seed, method, ...
+
+    Returns:
+        A ``Recorders`` fan-out, or a ``NullRecorder`` when recording is off.
+    """
+    from evo.record.base import NullRecorder, Recorders
+
+    folder = Path(directory)
+    meta = {"name": name, **metadata}
+    options = {"flush_every": config.flush_every, "frame_stride": config.frame_stride}
+    recorders: list[Recorder] = []
+    if config.mcap:
+        from evo.record.mcap_file import McapRecorder
+
+        recorders.append(McapRecorder(folder / f"{name}.mcap", model, meta, **options))
+    if config.rerun:
+        from evo.record.rrd import RerunRecorder
+
+        try:
+            recorders.append(RerunRecorder(folder / f"{name}.rrd", model, meta, **options))
+        except BaseException:
+            for r in recorders:
+                r.close({"status": "failed", "error": "could not open the .rrd file"})
+            raise
+    if not recorders:
+        return NullRecorder()
+    return Recorders(recorders)
