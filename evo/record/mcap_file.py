@@ -1,0 +1,352 @@
+"""MCAP recording of one evaluation, for Foxglove and for analysis (SPEC section 6).
+
+Topics (all with self-describing schemas):
+
+================  =========================  ===========================================
+topic             schema                     content
+================  =========================  ===========================================
+``/scene``        ``foxglove.SceneUpdate``   once: one entity per body (frame = body
+                                             name, primitives in the body frame), and
+                                             ``world`` for the floor and walls
+``/tf``           ``foxglove.FrameTransforms``  world -> every moving body, one per
+                                             frame (bodies at rest: once per episode)
+``/episode``      JSON ``evo.Episode``       one per recorded episode: index, env step,
+                                             success, target, body names, reward terms
+``/episode/step`` JSON ``evo.EpisodeStep``   one per frame: sim time, reward terms
+                                             and the running return
+``/train/curve``  JSON ``evo.CurveRow``      one learning-curve row per collector batch
+================  =========================  ===========================================
+
+Metadata records: ``evo.metadata`` (robot JSON, resolved config, seed, method, ...) at
+the start and ``evo.summary`` (fitness, ...) at close.
+
+Time: MCAP has one clock per file; here it is a replay clock. Recorded episodes are
+laid end to end on it (each starts 1 s after the previous one ended, frames at
+``start + sim_time - sim_time[0]``), so Foxglove plays them one after another.
+A curve row is stamped with the clock's current position; plot curves against their
+``env_steps`` field.
+
+Crash safety: the file is flushed (the open chunk closed and written) after the scene,
+after every episode and every ``flush_every`` curve rows; a killed process leaves a
+file whose messages up to the last flush ``evo.record.readback`` recovers.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import foxglove
+import mujoco
+import numpy as np
+import numpy.typing as npt
+from foxglove.channels import SceneUpdateChannel
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+from foxglove.messages import (
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    FrameTransforms,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    TextPrimitive,
+    Vector3,
+)
+
+from evo.record.base import Episode, RecorderBase
+from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
+from evo.record.rows import encode_metadata, encode_row, json_number, plain
+from evo.record.transforms import PARENT_FRAME, TransformEncoder
+
+TOPIC_SCENE = "/scene"
+TOPIC_TF = "/tf"
+TOPIC_EPISODE = "/episode"
+TOPIC_STEP = "/episode/step"
+TOPIC_CURVE = "/train/curve"
+METADATA = "evo.metadata"
+SUMMARY = "evo.summary"
+PROFILE = "evo"
+F64 = npt.NDArray[np.float64]
+EPISODE_GAP_NS = 1_000_000_000
+"""Gap between two recorded episodes on the replay clock, ns."""
+
+_CURVE_SCHEMA: dict[str, Any] = {
+    "title": "evo.CurveRow",
+    "description": "One learning-curve row; keys with '/' nest (loss/critic -> loss.critic).",
+    "type": "object",
+    "properties": {"env_steps": {"type": "number"}},
+    "additionalProperties": True,
+}
+_EPISODE_SCHEMA: dict[str, Any] = {
+    "title": "evo.Episode",
+    "type": "object",
+    "properties": {
+        "index": {"type": "integer"},
+        "env_step": {"type": "integer"},
+        "success": {"type": "boolean"},
+        "frames": {"type": "integer"},
+        "target": {"type": "array", "items": {"type": "number"}},
+    },
+}
+_STEP_SCHEMA: dict[str, Any] = {
+    "title": "evo.EpisodeStep",
+    "type": "object",
+    "properties": {
+        "episode": {"type": "integer"},
+        "step": {"type": "integer"},
+        "sim_time": {"type": "number"},
+        "reward": {"type": "object", "additionalProperties": {"type": "number"}},
+        "return": {"type": "number"},
+    },
+}
+
+
+class RecordError(RuntimeError):
+    """A recording file cannot be written or read; the message names the file."""
+
+
+def _colour(rgba: np.ndarray) -> Color:
+    return Color(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
+
+
+def _pose(pos: np.ndarray, quat_wxyz: np.ndarray) -> Pose:
+    w, x, y, z = (float(v) for v in quat_wxyz)
+    return Pose(
+        position=Vector3(x=float(pos[0]), y=float(pos[1]), z=float(pos[2])),
+        orientation=Quaternion(x=x, y=y, z=z, w=w),
+    )
+
+
+def scene_entity(
+    geometry: Geometry, entity_id: str, frame_id: str, texts: list[TextPrimitive] | None = None
+) -> SceneEntity:
+    """All of ``geometry`` (and ``texts``) as one Foxglove entity drawn in ``frame_id``.
+
+    Foxglove sizes are full extents (MuJoCo's are halves); cylinders get both end
+    scales 1 (the default 0 draws an invisible cone).
+    """
+    cubes, cylinders, spheres = [], [], []
+    for i, kind in enumerate(geometry.kind):
+        pose = _pose(geometry.pos[i], geometry.quat[i])
+        sx, sy, sz = (2 * float(v) for v in geometry.half_size[i])
+        size, colour = Vector3(x=sx, y=sy, z=sz), _colour(geometry.rgba[i])
+        if kind == BOX:
+            cubes.append(CubePrimitive(pose=pose, size=size, color=colour))
+        elif kind == CYLINDER:
+            cylinders.append(
+                CylinderPrimitive(
+                    pose=pose, size=size, bottom_scale=1.0, top_scale=1.0, color=colour
+                )
+            )
+        else:
+            spheres.append(SpherePrimitive(pose=pose, size=size, color=colour))
+    return SceneEntity(
+        frame_id=frame_id,
+        id=entity_id,
+        frame_locked=True,
+        cubes=cubes,
+        cylinders=cylinders,
+        spheres=spheres,
+        texts=texts or [],
+    )
+
+
+def body_scene(geometry: Geometry) -> SceneUpdate:
+    """One entity per body that has primitives, each locked to its body's frame."""
+    entities = []
+    for b, name in enumerate(geometry.body_names):
+        part = geometry.of_body(b)
+        if len(part):
+            frame = PARENT_FRAME if b == 0 else name
+            entities.append(scene_entity(part, entity_id=name, frame_id=frame))
+    return SceneUpdate(entities=entities)
+
+
+class McapFile:
+    """A Foxglove MCAP writer with its own context, metadata and close-time summary.
+
+    Args:
+        path: File to create (parent folders are made; an existing file is replaced).
+        metadata: Written at once as the ``evo.metadata`` record.
+    """
+
+    def __init__(self, path: str | Path, metadata: Mapping[str, Any]) -> None:
+        self.path = Path(path)
+        self.context = foxglove.Context()
+        options = MCAPWriteOptions(
+            compression=MCAPCompression.Zstd,
+            compression_level=1,
+            compression_threads=0,
+            profile=PROFILE,
+        )
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.writer = foxglove.open_mcap(
+                self.path, allow_overwrite=True, context=self.context, writer_options=options
+            )
+        except Exception as err:
+            raise RecordError(f"{self.path}: cannot create the MCAP file: {err}") from err
+        self.writer.write_metadata(METADATA, encode_metadata(metadata))
+
+    def json_channel(self, topic: str, schema: Mapping[str, Any]) -> foxglove.Channel:
+        """A JSON channel with a JSON schema (``title`` names the schema)."""
+        return foxglove.Channel(
+            topic, schema=dict(schema), message_encoding="json", context=self.context
+        )
+
+    def flush(self) -> None:
+        """Close the open chunk and write it to disk."""
+        self.writer.flush()
+
+    def close(self, summary: Mapping[str, Any]) -> None:
+        """Write ``summary`` as the ``evo.summary`` record and finish the file."""
+        try:
+            self.writer.write_metadata(SUMMARY, encode_metadata(summary))
+        finally:
+            self.writer.close()
+
+
+def moving_bodies(xpos: F64, xquat: F64) -> npt.NDArray[np.bool_]:
+    """(B,) mask of the bodies whose pose changes at all over the frames (T, B, .)."""
+    moved = np.any(xpos != xpos[:1], axis=(0, 2)) | np.any(xquat != xquat[:1], axis=(0, 2))
+    return np.asarray(moved, dtype=np.bool_)
+
+
+def _step_lines(episode: Episode) -> list[bytes]:
+    """The ``/episode/step`` JSON messages of ``episode``, one per frame."""
+    terms = list(episode.rewards)
+    values = np.zeros((episode.frames, len(terms)))
+    for j, term in enumerate(terms):
+        values[:, j] = episode.rewards[term]
+    table = np.column_stack([episode.time, values, np.cumsum(values.sum(axis=1))])
+    rows = table.tolist()
+    if not np.isfinite(table).all():
+        return [_step_json(episode.index, k, terms, row) for k, row in enumerate(rows)]
+    # Fast path: every value finite, so Python's float repr is valid, exact JSON.
+    reward = ",".join(json.dumps(t).replace("%", "%%") + ":%r" for t in terms)
+    fmt = '{"episode":%d,"step":%d,"sim_time":%r,"reward":{' + reward + '},"return":%r}'
+    return [(fmt % (episode.index, k, *row)).encode() for k, row in enumerate(rows)]
+
+
+def _step_json(index: int, step: int, terms: list[str], row: list[float]) -> bytes:
+    """One ``/episode/step`` message with non-finite values encoded as in curve rows."""
+    safe = [json_number("reward", v) for v in row]
+    obj = {
+        "episode": index,
+        "step": step,
+        "sim_time": safe[0],
+        "reward": dict(zip(terms, safe[1:-1], strict=True)),
+        "return": safe[-1],
+    }
+    return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode()
+
+
+class McapRecorder(RecorderBase):
+    """Writes ``evals/<robot>.mcap``: geometry, sampled episodes, curve and metadata.
+
+    Args:
+        path: The MCAP file to create.
+        model: The compiled model of the whole scene (robot, arena, rocks, target).
+        metadata: Robot JSON, resolved config, seed, method, ... (JSON-able values).
+        flush_every: Flush to disk every this many curve rows.
+        frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        model: mujoco.MjModel,
+        metadata: Mapping[str, Any],
+        *,
+        flush_every: int = 5,
+        frame_stride: int = 1,
+    ) -> None:
+        if flush_every < 1 or frame_stride < 1:
+            raise ValueError("flush_every and frame_stride must be >= 1")
+        self.file = McapFile(path, metadata)
+        self.path = self.file.path
+        self.flush_every, self.frame_stride = flush_every, frame_stride
+        geometry = scene_geometry(model)
+        self.body_names = geometry.body_names
+        self._encoders: dict[tuple[str, ...], TransformEncoder] = {}
+        ctx = self.file.context
+        self._scene = SceneUpdateChannel(TOPIC_SCENE, context=ctx)
+        self._tf = foxglove.Channel(
+            TOPIC_TF, schema=FrameTransforms.get_schema(), message_encoding="protobuf", context=ctx
+        )
+        self._episode = self.file.json_channel(TOPIC_EPISODE, _EPISODE_SCHEMA)
+        self._step = self.file.json_channel(TOPIC_STEP, _STEP_SCHEMA)
+        self._curve = self.file.json_channel(TOPIC_CURVE, _CURVE_SCHEMA)
+        self._scene.log(body_scene(geometry), log_time=0)
+        self.file.flush()
+        self._clock_ns = 0
+        self._rows = 0
+
+    def curve(self, row: Mapping[str, float]) -> None:
+        """Write one learning-curve row; flush every ``flush_every`` rows."""
+        if "env_steps" not in row:
+            raise KeyError(f"{self.path}: a curve row needs 'env_steps', got {list(row)}")
+        self._curve.log(encode_row(row), log_time=self._clock_ns)
+        self._rows += 1
+        if self._rows % self.flush_every == 0:
+            self.file.flush()
+
+    def _encoder(self, names: tuple[str, ...]) -> TransformEncoder:
+        if names not in self._encoders:
+            self._encoders[names] = TransformEncoder(names)
+        return self._encoders[names]
+
+    def episode(self, episode: Episode) -> None:
+        """Write one episode (info, transforms, per-frame rewards) and flush.
+
+        Bodies that do not move during the episode (the target, resting rocks) get one
+        transform at the episode's start instead of one per frame.
+        """
+        if episode.nbody != len(self.body_names):
+            raise ValueError(
+                f"{self.path}: episode {episode.index} has {episode.nbody} bodies,"
+                f" the model has {len(self.body_names)}"
+            )
+        ep = episode.strided(self.frame_stride)
+        offsets = np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
+        stamps = (self._clock_ns + offsets).tolist()
+        moving = 1 + np.flatnonzero(moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:]))
+        still = np.setdiff1d(np.arange(1, ep.nbody), moving)
+        names = np.array(self.body_names)
+        info = {
+            "index": ep.index,
+            "env_step": ep.env_step,
+            "success": bool(ep.success),
+            "frames": ep.frames,
+            "target": plain(np.asarray(ep.target, np.float64)),
+            "clock_start": stamps[0],
+            "clock_end": stamps[-1],
+            "bodies": list(self.body_names),
+            "moving": names[moving].tolist(),
+            "still": names[still].tolist(),
+            "reward_terms": list(ep.rewards),
+        }
+        self._episode.log(json.dumps(info).encode(), log_time=stamps[0])
+        if still.size:
+            first = self._encoder(tuple(info["still"])).encode(
+                stamps[:1], ep.xpos[:1, still], ep.xquat[:1, still]
+            )
+            self._tf.log(first[0], log_time=stamps[0])
+        tf = self._encoder(tuple(info["moving"])).encode(
+            stamps, ep.xpos[:, moving], ep.xquat[:, moving]
+        )
+        log_tf, log_step = self._tf.log, self._step.log
+        for stamp, message in zip(stamps, tf, strict=True):
+            log_tf(message, log_time=stamp)
+        for stamp, line in zip(stamps, _step_lines(ep), strict=True):
+            log_step(line, log_time=stamp)
+        self._clock_ns = stamps[-1] + EPISODE_GAP_NS
+        self.file.flush()
+
+    def _close(self, summary: Mapping[str, Any]) -> None:
+        self.file.close(summary)
