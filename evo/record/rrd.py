@@ -1,0 +1,243 @@
+"""rerun ``.rrd`` recording of one evaluation, for the rerun viewer (SPEC section 6).
+
+Entities:
+
+* ``/scene/<body>``: one per body, its geometry logged once (static) under
+  ``/scene/<body>/geometry`` in the body frame, its pose as a ``Transform3D`` on the
+  ``replay`` timeline (columnar ``send_columns``, one call per moving body and
+  episode); ``/scene/world`` holds the floor and walls.
+* ``/episode/reward/<term>``, ``/episode/return``: per-frame reward terms and the
+  running return on ``replay``; ``/episode/log``: one line per recorded episode.
+* ``/curve/<key>``: every learning-curve value on the ``env_step`` timeline (keys with
+  ``/`` become sub-paths, ``loss/critic`` -> ``/curve/loss/critic``).
+* ``/metadata/<key>`` and ``/summary``: text documents.
+
+``replay`` is the same clock as the MCAP file's (episodes end to end, 1 s apart).
+Curve rows are buffered and sent every ``flush_every`` rows as one column per key,
+which costs a few microseconds per row instead of a ``log`` call per value.
+The default blueprint shows the 3D scene next to tabs of curve plots.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import numpy.typing as npt
+import rerun as rr
+import rerun.blueprint as rrb
+
+from evo.record.base import Episode, RecorderBase
+from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
+from evo.record.mcap_file import EPISODE_GAP_NS, RecordError, moving_bodies
+from evo.record.rows import plain
+
+REPLAY = "replay"
+ENV_STEP = "env_step"
+SCENE = "scene"
+
+
+def entity(*parts: str) -> str:
+    """An entity path from raw name parts (each escaped; ``/`` inside a part nests)."""
+    pieces = [rr.escape_entity_path_part(p) for part in parts for p in part.split("/")]
+    return "/" + "/".join(pieces)
+
+
+def _rgba8(rgba: npt.NDArray[np.float64]) -> npt.NDArray[np.uint8]:
+    return np.clip(np.round(rgba * 255), 0, 255).astype(np.uint8)
+
+
+def log_geometry(rec: rr.RecordingStream, path: str, geometry: Geometry) -> None:
+    """Log ``geometry`` under ``path`` as static boxes, cylinders and ellipsoids."""
+    solid = rr.components.FillMode.Solid
+    for kind in (BOX, CYLINDER, ELLIPSOID):
+        part = geometry.of_kind(kind)
+        if not len(part):
+            continue
+        common: dict[str, Any] = {
+            "centers": part.pos,
+            "quaternions": part.quat[:, [1, 2, 3, 0]],
+            "colors": _rgba8(part.rgba),
+            "fill_mode": solid,
+        }
+        if kind == BOX:
+            archetype: Any = rr.Boxes3D(half_sizes=part.half_size, **common)
+        elif kind == CYLINDER:
+            archetype = rr.Cylinders3D(
+                lengths=2 * part.half_size[:, 2], radii=part.half_size[:, 0], **common
+            )
+        else:
+            archetype = rr.Ellipsoids3D(half_sizes=part.half_size, **common)
+        rec.log(f"{path}/{kind}", archetype, static=True)
+
+
+def log_bodies(rec: rr.RecordingStream, root: str, geometry: Geometry) -> list[str]:
+    """Log each body's geometry (body frame) under ``root/<body>``; returns the paths."""
+    paths = [entity(root, name) for name in geometry.body_names]
+    for b, path in enumerate(paths):
+        part = geometry.of_body(b)
+        if len(part):
+            log_geometry(rec, f"{path}/geometry", part)
+    return paths
+
+
+def log_text(rec: rr.RecordingStream, path: str, values: Mapping[str, Any]) -> None:
+    """Each value as a static text document ``path/<key>`` (JSON for non-strings)."""
+    for key, value in values.items():
+        text = value if isinstance(value, str) else json.dumps(plain(value), indent=1)
+        rec.log(entity(path, key), rr.TextDocument(text), static=True)
+
+
+def eval_blueprint() -> rrb.Blueprint:
+    """3D replay on the left; learning curve, losses and episode rewards on the right."""
+    curves = rrb.Tabs(
+        rrb.TimeSeriesView(
+            name="return", origin="/curve", contents=["/curve/mean_return", "/curve/success_rate"]
+        ),
+        rrb.TimeSeriesView(name="losses", origin="/curve/loss"),
+        rrb.TimeSeriesView(name="reward terms", origin="/curve/reward"),
+        rrb.TimeSeriesView(name="whole curve", origin="/curve"),
+    )
+    episode = rrb.TimeSeriesView(name="episode reward", origin="/episode")
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="replay", origin=f"/{SCENE}"),
+            rrb.Vertical(curves, episode, row_shares=[3, 2]),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+def open_rrd(path: Path, recording_id: str, blueprint: rrb.Blueprint) -> rr.RecordingStream:
+    """A recording stream saving to ``path`` (parent folders made, file replaced)."""
+    rec = rr.RecordingStream("evo", recording_id=recording_id)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rec.save(path, default_blueprint=blueprint)
+    except Exception as err:
+        raise RecordError(f"{path}: cannot create the .rrd file: {err}") from err
+    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    return rec
+
+
+class RerunRecorder(RecorderBase):
+    """Writes ``evals/<robot>.rrd``: the 3D replay of sampled episodes and the curve.
+
+    Args:
+        path: The ``.rrd`` file to create.
+        model: The compiled model of the whole scene (robot, arena, rocks, target).
+        metadata: Robot JSON, resolved config, seed, method, ...; ``metadata["name"]``
+            (else the file name) is the recording id.
+        flush_every: Send buffered curve rows every this many rows.
+        frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        model: mujoco.MjModel,
+        metadata: Mapping[str, Any],
+        *,
+        flush_every: int = 5,
+        frame_stride: int = 1,
+    ) -> None:
+        if flush_every < 1 or frame_stride < 1:
+            raise ValueError("flush_every and frame_stride must be >= 1")
+        self.path = Path(path)
+        self.flush_every, self.frame_stride = flush_every, frame_stride
+        name = str(metadata.get("name", self.path.stem))
+        self.rec = open_rrd(self.path, name, eval_blueprint())
+        geometry = scene_geometry(model)
+        self.body_names = geometry.body_names
+        self.body_paths = log_bodies(self.rec, SCENE, geometry)
+        log_text(self.rec, "metadata", metadata)
+        self._rows: list[Mapping[str, float]] = []
+        self._clock_ns = 0
+
+    def curve(self, row: Mapping[str, float]) -> None:
+        """Buffer one learning-curve row; send the buffer every ``flush_every`` rows."""
+        if "env_steps" not in row:
+            raise KeyError(f"{self.path}: a curve row needs 'env_steps', got {list(row)}")
+        self._rows.append(dict(row))
+        if len(self._rows) >= self.flush_every:
+            self._send_curve()
+
+    def _send_curve(self) -> None:
+        rows, self._rows = self._rows, []
+        if not rows:
+            return
+        steps = np.array([round(float(r["env_steps"])) for r in rows], dtype=np.int64)
+        keys = dict.fromkeys(k for r in rows for k in r if k != "env_steps")
+        for key in keys:
+            have = np.array([key in r for r in rows])
+            values = np.array([float(r[key]) for r in rows if key in r], dtype=np.float64)
+            self.rec.send_columns(
+                entity("curve", key),
+                indexes=[rr.TimeColumn(ENV_STEP, sequence=steps[have])],
+                columns=rr.Scalars.columns(scalars=values),
+            )
+
+    def episode(self, episode: Episode) -> None:
+        """Send one episode's body poses and rewards on the ``replay`` timeline."""
+        if episode.nbody != len(self.body_names):
+            raise ValueError(
+                f"{self.path}: episode {episode.index} has {episode.nbody} bodies,"
+                f" the model has {len(self.body_names)}"
+            )
+        ep = episode.strided(self.frame_stride)
+        stamps = self._clock_ns + np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
+        clock = rr.TimeColumn(REPLAY, duration=stamps.astype("timedelta64[ns]"))
+        moving = np.zeros(ep.nbody, dtype=bool)
+        moving[1:] = moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:])
+        for b in range(1, ep.nbody):
+            frames = slice(None) if moving[b] else slice(0, 1)
+            index = (
+                clock
+                if moving[b]
+                else rr.TimeColumn(REPLAY, duration=stamps[:1].astype("timedelta64[ns]"))
+            )
+            self.rec.send_columns(
+                self.body_paths[b],
+                indexes=[index],
+                columns=rr.Transform3D.columns(
+                    translation=ep.xpos[frames, b], quaternion=ep.xquat[frames, b][:, [1, 2, 3, 0]]
+                ),
+            )
+        self._send_rewards(ep, clock)
+        self._clock_ns = int(stamps[-1]) + EPISODE_GAP_NS
+
+    def _send_rewards(self, ep: Episode, clock: rr.TimeColumn) -> None:
+        total = np.zeros(ep.frames)
+        for term, values in ep.rewards.items():
+            values = np.asarray(values, dtype=np.float64)
+            total += values
+            self.rec.send_columns(
+                entity("episode", "reward", term),
+                indexes=[clock],
+                columns=rr.Scalars.columns(scalars=values),
+            )
+        self.rec.send_columns(
+            "/episode/return", indexes=[clock], columns=rr.Scalars.columns(scalars=np.cumsum(total))
+        )
+        self.rec.set_time(REPLAY, duration=np.timedelta64(self._clock_ns, "ns"))
+        outcome = "success" if ep.success else "no success"
+        self.rec.log(
+            "/episode/log",
+            rr.TextLog(
+                f"episode {ep.index} (env step {ep.env_step}): {outcome}, "
+                f"return {float(total.sum()):.4g}"
+            ),
+        )
+
+    def _close(self, summary: Mapping[str, Any]) -> None:
+        try:
+            self._send_curve()
+            log_text(self.rec, "summary", summary)
+            self.rec.flush()
+        finally:
+            self.rec.disconnect()
