@@ -1,0 +1,213 @@
+"""Recording files as outside tools see them: the ``rerun`` CLI's checks, the .rrd's
+entities, crash safety of a killed writer, and the run-level files."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pandas as pd
+import pytest
+from test_record import curve_rows, scene, simulate  # tests/ is on sys.path under pytest
+
+from evo.record import (
+    Birth,
+    McapRecorder,
+    Recorders,
+    RerunRecorder,
+    RunRecorder,
+    is_complete,
+    read_births,
+    read_curve,
+    read_episodes,
+    read_metadata,
+)
+from evo.robot import load_robot
+from evo.robot.builder import build
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def rerun_cli() -> str:
+    """The ``rerun`` executable that ships with rerun-sdk."""
+    local = Path(sys.executable).parent / "rerun"
+    found = str(local) if local.exists() else shutil.which("rerun")
+    assert found, "the rerun CLI (part of rerun-sdk) is not installed"
+    return found
+
+
+def cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [rerun_cli(), *map(str, args)], capture_output=True, text=True, timeout=120, check=False
+    )
+
+
+def entities(rrd: Path) -> set[str]:
+    """Entity paths of the data (not blueprint) chunks, from ``rerun rrd print``."""
+    out = cli("rrd", "print", rrd)
+    assert out.returncode == 0, out.stderr
+    return set(re.findall(r" - (/\S+) - data columns", out.stdout))
+
+
+def record_evaluation(folder: Path, model: mujoco.MjModel) -> tuple[Path, Path]:
+    """An evaluation's two files: 12 curve rows and two simulated episodes."""
+    mcap, rrd = folder / "robot-1.mcap", folder / "robot-1.rrd"
+    meta = {"robot": (ROOT / "robots/four_wheeler.json").read_text(), "seed": 5}
+    with Recorders([McapRecorder(mcap, model, meta), RerunRecorder(rrd, model, meta)]) as rec:
+        for i, row in enumerate(curve_rows(12)):
+            rec.curve(row)
+            if i in (3, 9):
+                rec.episode(simulate(model, frames=60, index=i))
+        rec.close({"fitness": 0.5})
+    return mcap, rrd
+
+
+def test_files_pass_the_rerun_checks(tmp_path: Path) -> None:
+    mcap, rrd = record_evaluation(tmp_path, scene(n_rocks=3))
+    check = cli("mcap", "check", mcap)
+    assert check.returncode == 0, check.stdout + check.stderr
+    for topic in ("/scene", "/tf", "/episode", "/episode/step", "/train/curve"):
+        assert re.search(rf"ok\s+\d+\s+\d+\s+{re.escape(topic)}\s", check.stdout), topic
+    verify = cli("rrd", "verify", rrd)
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+
+
+def test_rrd_holds_the_scene_curves_and_a_blueprint(tmp_path: Path) -> None:
+    model = scene(n_rocks=2)
+    _, rrd = record_evaluation(tmp_path, model)
+    found = entities(rrd)
+    expected = {
+        "/scene/brain",
+        "/scene/wheel3",
+        "/scene/rock0",
+        "/scene/rock1",
+        "/scene/target",
+        "/scene/brain/geometry/box",
+        "/scene/wheel3/geometry/cylinder",
+        "/scene/rock0/geometry/box",
+        "/scene/world/geometry/box",
+        "/episode/reward/time",
+        "/episode/reward/approach",
+        "/episode/return",
+        "/episode/log",
+        "/curve/mean_return",
+        "/curve/success_rate",
+        "/curve/loss/objective",
+        "/curve/reward/approach",
+        "/metadata/robot",
+        "/metadata/seed",
+        "/summary/fitness",
+    }
+    assert expected <= found, f"missing entities: {sorted(expected - found)}"
+    printed = cli("rrd", "print", rrd).stdout
+    assert "Blueprint" in printed and printed.count("/view/") >= 5, "no default blueprint"
+
+
+def test_exception_inside_with_still_closes_the_rrd(tmp_path: Path) -> None:
+    model = scene(n_rocks=0)
+    mcap, rrd = tmp_path / "f.mcap", tmp_path / "f.rrd"
+    recorders = Recorders([McapRecorder(mcap, model, {}), RerunRecorder(rrd, model, {})])
+    with pytest.raises(ZeroDivisionError), recorders as rec:
+        rec.curve({"env_steps": 64.0, "mean_return": 0.5})
+        rec.episode(simulate(model, frames=20))
+        _ = 1 / 0
+    verify = cli("rrd", "verify", rrd)
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+    assert is_complete(mcap) and read_metadata(mcap)["status"] == "failed"
+    assert len(read_curve(mcap)) == 1 and len(read_episodes(mcap)) == 1
+
+
+CHILD = textwrap.dedent(
+    """
+    import sys, time
+    sys.path.insert(0, "tests")
+    from evo.record import McapRecorder, Recorders, RerunRecorder
+    from test_record import curve_rows, scene, simulate
+    model = scene(n_rocks=2)
+    out = sys.argv[1]
+    rec = Recorders([
+        McapRecorder(out + ".mcap", model, {"seed": 9}, flush_every=5),
+        RerunRecorder(out + ".rrd", model, {"seed": 9}, flush_every=5),
+    ])
+    rec.episode(simulate(model, frames=40))
+    for row in curve_rows(12):
+        rec.curve(row)
+    print("READY", flush=True)
+    time.sleep(120)
+    """
+)
+
+
+def test_killed_writer_leaves_everything_up_to_the_last_flush(tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD, str(out)], cwd=ROOT, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "READY"
+        child.send_signal(signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait(timeout=30)
+    mcap = out.with_suffix(".mcap")
+    assert not is_complete(mcap)
+    pd.testing.assert_frame_equal(
+        read_curve(mcap), pd.DataFrame(curve_rows(10)), check_exact=True
+    )  # flushed at rows 5 and 10
+    (episode,) = read_episodes(mcap)
+    want = simulate(scene(n_rocks=2), frames=40)
+    np.testing.assert_array_equal(episode.xpos[:, 1:], want.xpos[:, 1:])
+    assert read_metadata(mcap) == {"seed": 9}
+    rrd = out.with_suffix(".rrd")
+    assert cli("rrd", "verify", rrd).returncode != 0, "a killed writer leaves no footer"
+    lenient = cli("rrd", "verify", "--check-footers", "false", rrd)
+    assert lenient.returncode == 0, lenient.stdout + lenient.stderr
+
+
+def test_run_files_hold_births_and_robots(tmp_path: Path) -> None:
+    births = [
+        Birth(
+            i,
+            f"robot-{i:08x}",
+            fitness=0.1 * i - 0.2,
+            accepted=i % 3 != 1,
+            population_best=0.1 * i,
+            population_mean=0.05 * i,
+            extra={"generation": i // 2, "budget": 50_000 + 1000 * i},
+        )
+        for i in range(7)
+    ]
+    with RunRecorder(tmp_path, {"seed": 0, "method": "E+L"}) as run:
+        for birth in births:
+            run.birth(birth)
+        for name in ("four_wheeler", "snake"):
+            run.robot(name, build(load_robot(ROOT / f"robots/{name}.json")).compile(), fitness=0.4)
+        run.close({"best_fitness": 0.4})
+    table = read_births(tmp_path / "run.mcap")
+    assert list(table["birth"]) == list(range(7))
+    assert list(table["accepted"]) == [b.accepted for b in births]
+    np.testing.assert_array_equal(table["fitness"], [b.fitness for b in births])
+    assert list(table.columns[-2:]) == ["generation", "budget"]
+    assert read_metadata(tmp_path / "run.mcap")["best_fitness"] == 0.4
+    assert cli("mcap", "check", tmp_path / "run.mcap").returncode == 0
+    assert cli("rrd", "verify", tmp_path / "run.rrd").returncode == 0
+    found = entities(tmp_path / "run.rrd")
+    expected = {
+        "/ga/fitness/accepted",
+        "/ga/fitness/rejected",
+        "/ga/population/best",
+        "/ga/population/mean",
+        "/ga/log",
+        "/robots/four_wheeler/box",
+        "/robots/snake/cylinder",
+        "/robots/snake/label",
+    }
+    assert expected <= found, f"missing entities: {sorted(expected - found)}"
