@@ -29,6 +29,7 @@ from evo.record import (
     open_recorder,
     read_curve,
     read_episodes,
+    read_json_topic,
     read_metadata,
     scene_geometry,
     should_record,
@@ -274,27 +275,42 @@ def test_curve_reads_back_exactly(tmp_path: Path) -> None:
     assert math.copysign(1.0, curve["reward/approach"][1]) == -1.0, "-0.0 keeps its sign"
 
 
-def test_episode_poses_equal_the_simulator(tmp_path: Path) -> None:
+def robot_bodies(model: mujoco.MjModel) -> np.ndarray:
+    """Ids of the robot's bodies (the tree under ``brain``)."""
+    return np.flatnonzero(model.body_rootid == model.body("brain").id)
+
+
+@pytest.mark.parametrize("tolerance", [0.0, 1e-6])
+def test_episode_poses_equal_the_simulator(tmp_path: Path, tolerance: float) -> None:
     model = scene(n_rocks=4)
     episodes = [simulate(model, frames=120, index=i, seed=i) for i in (0, 7)]
     episodes[1].rewards["approach"][5] = math.nan  # non-finite values take the slow path
     path = tmp_path / "e.mcap"
-    with McapRecorder(path, model, {"seed": 1}) as rec:
+    with McapRecorder(path, model, {"seed": 1}, still_tolerance=tolerance) as rec:
         for episode in episodes:
             rec.episode(episode)
     back = read_episodes(path)
     assert [e.index for e in back] == [0, 7]
+    robot = robot_bodies(model)
     for want, got in zip(episodes, back, strict=True):
         assert got.env_step == want.env_step and got.success == want.success
         np.testing.assert_array_equal(got.time, want.time)
-        np.testing.assert_array_equal(got.xpos[:, 1:], want.xpos[:, 1:])
-        np.testing.assert_array_equal(got.xquat[:, 1:], want.xquat[:, 1:])
+        np.testing.assert_array_equal(got.xpos[:, robot], want.xpos[:, robot])
+        np.testing.assert_array_equal(got.xquat[:, robot], want.xquat[:, robot])
+        if tolerance == 0.0:
+            np.testing.assert_array_equal(got.xpos[:, 1:], want.xpos[:, 1:])
+            np.testing.assert_array_equal(got.xquat[:, 1:], want.xquat[:, 1:])
+        else:  # rocks at rest come back at their first pose, within the tolerance
+            np.testing.assert_allclose(got.xpos[:, 1:], want.xpos[:, 1:], rtol=0, atol=tolerance)
+            np.testing.assert_allclose(got.xquat[:, 1:], want.xquat[:, 1:], rtol=0, atol=tolerance)
         np.testing.assert_array_equal(got.target, want.target)
         assert list(got.rewards) == list(want.rewards)
         for term in want.rewards:
             np.testing.assert_array_equal(got.rewards[term], want.rewards[term])
     target = model.body("target").id
-    assert np.all(back[0].xpos[:, target] == back[0].xpos[0, target]), "the target stands still"
+    assert np.all(back[0].xpos[:, target] == episodes[0].xpos[0, target]), "the target is still"
+    info = read_json_topic(path, "/episode")[0]
+    assert "target" in info["still"] and "brain" in info["moving"], "still bodies written once"
 
 
 def test_stride_applies_to_the_recording(tmp_path: Path) -> None:

@@ -21,9 +21,11 @@ import numpy.typing as npt
 F64 = npt.NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Episode:
     """One recorded episode of one arena, at control-step resolution.
+
+    Compared by identity (its fields are arrays); compare fields with numpy.
 
     Attributes:
         index: Episode number within the evaluation (0 = first).
@@ -111,6 +113,68 @@ class Episode:
             rewards,
             self.success,
         )
+
+
+STILL_TOLERANCE = 1e-6
+"""Default bound (m, and quaternion units) under which a body counts as at rest."""
+
+
+def moving_bodies(xpos: F64, xquat: F64, tolerance: float = 0.0) -> npt.NDArray[np.bool_]:
+    """(B,) mask of the bodies whose pose leaves its first frame's by more than
+    ``tolerance`` (any coordinate, or any quaternion component) over frames (T, B, .)."""
+    moved = np.any(np.abs(xpos - xpos[:1]) > tolerance, axis=(0, 2))
+    turned = np.any(np.abs(xquat - xquat[:1]) > tolerance, axis=(0, 2))
+    return np.asarray(moved | turned, dtype=np.bool_)
+
+
+@dataclass(frozen=True)
+class Frames:
+    """An episode made ready for writing, shared by the file formats.
+
+    Attributes:
+        episode: The episode after the frame stride.
+        stamps: (T,) replay-clock time of each frame, int64 ns.
+        moving: Ids of the bodies written every frame (world excluded).
+        still: Ids of the bodies at rest, written once at the episode's start.
+    """
+
+    episode: Episode
+    stamps: npt.NDArray[np.int64]
+    moving: npt.NDArray[np.intp]
+    still: npt.NDArray[np.intp]
+
+
+def prepare(
+    episode: Episode, *, nbody: int, where: object, stride: int, tolerance: float, clock_ns: int
+) -> Frames:
+    """Check ``episode`` against the model, apply the stride, place it on the clock.
+
+    Args:
+        episode: As handed over by the learner.
+        nbody: Bodies of the recorder's model (world included).
+        where: The file written, for error messages.
+        stride: Frame stride (``Episode.strided``).
+        tolerance: Bodies moving less than this are "still" (0 = only exactly still).
+        clock_ns: Replay-clock time of the first frame, ns.
+    """
+    if episode.nbody != nbody:
+        raise ValueError(
+            f"{where}: episode {episode.index} has {episode.nbody} bodies, the model has {nbody}"
+        )
+    ep = episode.strided(stride)
+    stamps = clock_ns + np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
+    mask = moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:], tolerance)
+    return Frames(ep, stamps, 1 + np.flatnonzero(mask), 1 + np.flatnonzero(~mask))
+
+
+def check_options(flush_every: int, frame_stride: int, still_tolerance: float) -> None:
+    """The recorders' shared keyword checks."""
+    if flush_every < 1 or frame_stride < 1:
+        raise ValueError(
+            f"flush_every and frame_stride must be >= 1, got {flush_every} and {frame_stride}"
+        )
+    if still_tolerance < 0:
+        raise ValueError(f"still_tolerance must be >= 0, got {still_tolerance}")
 
 
 @runtime_checkable

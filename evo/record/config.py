@@ -29,7 +29,7 @@ class EpisodeChoice:
 
     first: bool = True
     last: bool = True
-    every: int = 50
+    every: int = 100
 
     def __post_init__(self) -> None:
         if self.every < 0:
@@ -45,6 +45,8 @@ class RecordConfig:
         rerun: Write rerun files (``evals/<robot>.rrd``, ``run.rrd``).
         episodes: Which episodes to record.
         frame_stride: Keep every n-th control step of a recorded episode.
+        still_tolerance: A body that moves less than this during an episode (m, and
+            quaternion units) is stored once for the episode (0 = every frame).
         flush_every: Flush the files every n learning-curve rows.
     """
 
@@ -52,13 +54,16 @@ class RecordConfig:
     rerun: bool = True
     episodes: EpisodeChoice = field(default_factory=EpisodeChoice)
     frame_stride: int = 1
-    flush_every: int = 5
+    still_tolerance: float = 1e-6
+    flush_every: int = 10
 
     def __post_init__(self) -> None:
         if self.frame_stride < 1:
             raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
         if self.flush_every < 1:
             raise ValueError(f"flush_every must be >= 1, got {self.flush_every}")
+        if self.still_tolerance < 0:
+            raise ValueError(f"still_tolerance must be >= 0, got {self.still_tolerance}")
 
     @property
     def enabled(self) -> bool:
@@ -107,7 +112,11 @@ def open_recorder(
 
     folder = Path(directory)
     meta = {"name": name, **metadata}
-    options = {"flush_every": config.flush_every, "frame_stride": config.frame_stride}
+    options: dict[str, Any] = {
+        "flush_every": config.flush_every,
+        "frame_stride": config.frame_stride,
+        "still_tolerance": config.still_tolerance,
+    }
     recorders: list[Recorder] = []
     if config.mcap:
         from evo.record.mcap_file import McapRecorder

@@ -9,7 +9,8 @@ topic             schema                     content
                                              name, primitives in the body frame), and
                                              ``world`` for the floor and walls
 ``/tf``           ``foxglove.FrameTransforms``  world -> every moving body, one per
-                                             frame (bodies at rest: once per episode)
+                                             frame; bodies at rest (within
+                                             ``still_tolerance``): once per episode
 ``/episode``      JSON ``evo.Episode``       one per recorded episode: index, env step,
                                              success, target, body names, reward terms
 ``/episode/step`` JSON ``evo.EpisodeStep``   one per frame: sim time, reward terms
@@ -58,7 +59,7 @@ from foxglove.messages import (
     Vector3,
 )
 
-from evo.record.base import Episode, RecorderBase
+from evo.record.base import STILL_TOLERANCE, Episode, RecorderBase, check_options, prepare
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
 from evo.record.rows import encode_metadata, encode_row, json_number, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder
@@ -211,12 +212,6 @@ class McapFile:
             self.writer.close()
 
 
-def moving_bodies(xpos: F64, xquat: F64) -> npt.NDArray[np.bool_]:
-    """(B,) mask of the bodies whose pose changes at all over the frames (T, B, .)."""
-    moved = np.any(xpos != xpos[:1], axis=(0, 2)) | np.any(xquat != xquat[:1], axis=(0, 2))
-    return np.asarray(moved, dtype=np.bool_)
-
-
 def _step_lines(episode: Episode) -> list[bytes]:
     """The ``/episode/step`` JSON messages of ``episode``, one per frame."""
     terms = list(episode.rewards)
@@ -255,6 +250,8 @@ class McapRecorder(RecorderBase):
         metadata: Robot JSON, resolved config, seed, method, ... (JSON-able values).
         flush_every: Flush to disk every this many curve rows.
         frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
+        still_tolerance: A body whose pose stays this close (m, quaternion units) to
+            its first frame's all episode long is written once; 0 = only exactly still.
     """
 
     def __init__(
@@ -263,14 +260,15 @@ class McapRecorder(RecorderBase):
         model: mujoco.MjModel,
         metadata: Mapping[str, Any],
         *,
-        flush_every: int = 5,
+        flush_every: int = 10,
         frame_stride: int = 1,
+        still_tolerance: float = STILL_TOLERANCE,
     ) -> None:
-        if flush_every < 1 or frame_stride < 1:
-            raise ValueError("flush_every and frame_stride must be >= 1")
+        check_options(flush_every, frame_stride, still_tolerance)
         self.file = McapFile(path, metadata)
         self.path = self.file.path
         self.flush_every, self.frame_stride = flush_every, frame_stride
+        self.still_tolerance = still_tolerance
         geometry = scene_geometry(model)
         self.body_names = geometry.body_names
         self._encoders: dict[tuple[str, ...], TransformEncoder] = {}
@@ -304,20 +302,20 @@ class McapRecorder(RecorderBase):
     def episode(self, episode: Episode) -> None:
         """Write one episode (info, transforms, per-frame rewards) and flush.
 
-        Bodies that do not move during the episode (the target, resting rocks) get one
+        Bodies at rest (the target, resting rocks; see ``still_tolerance``) get one
         transform at the episode's start instead of one per frame.
         """
-        if episode.nbody != len(self.body_names):
-            raise ValueError(
-                f"{self.path}: episode {episode.index} has {episode.nbody} bodies,"
-                f" the model has {len(self.body_names)}"
-            )
-        ep = episode.strided(self.frame_stride)
-        offsets = np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
-        stamps = (self._clock_ns + offsets).tolist()
-        moving = 1 + np.flatnonzero(moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:]))
-        still = np.setdiff1d(np.arange(1, ep.nbody), moving)
+        frames = prepare(
+            episode,
+            nbody=len(self.body_names),
+            where=self.path,
+            stride=self.frame_stride,
+            tolerance=self.still_tolerance,
+            clock_ns=self._clock_ns,
+        )
+        ep, stamps = frames.episode, frames.stamps.tolist()
         names = np.array(self.body_names)
+        moving, still = names[frames.moving].tolist(), names[frames.still].tolist()
         info = {
             "index": ep.index,
             "env_step": ep.env_step,
@@ -327,18 +325,18 @@ class McapRecorder(RecorderBase):
             "clock_start": stamps[0],
             "clock_end": stamps[-1],
             "bodies": list(self.body_names),
-            "moving": names[moving].tolist(),
-            "still": names[still].tolist(),
+            "moving": moving,
+            "still": still,
             "reward_terms": list(ep.rewards),
         }
         self._episode.log(json.dumps(info).encode(), log_time=stamps[0])
-        if still.size:
-            first = self._encoder(tuple(info["still"])).encode(
-                stamps[:1], ep.xpos[:1, still], ep.xquat[:1, still]
+        if still:
+            first = self._encoder(tuple(still)).encode(
+                stamps[:1], ep.xpos[:1, frames.still], ep.xquat[:1, frames.still]
             )
             self._tf.log(first[0], log_time=stamps[0])
-        tf = self._encoder(tuple(info["moving"])).encode(
-            stamps, ep.xpos[:, moving], ep.xquat[:, moving]
+        tf = self._encoder(tuple(moving)).encode(
+            stamps, ep.xpos[:, frames.moving], ep.xquat[:, frames.moving]
         )
         log_tf, log_step = self._tf.log, self._step.log
         for stamp, message in zip(stamps, tf, strict=True):

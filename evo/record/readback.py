@@ -2,9 +2,11 @@
 
 All readers scan the file once, record by record, so they also read a file whose
 writer was killed: everything up to the last flush comes back (``is_complete`` tells
-whether the file was closed properly). Precision: poses, times and rewards come back
-bit-for-bit (float64 protobuf doubles and shortest-repr JSON floats); curve values
-come back exactly, ``NaN`` and ``+-inf`` included.
+whether the file was closed properly). Precision: times, rewards and the poses of
+moving bodies come back bit for bit (float64 protobuf doubles, shortest-repr JSON
+floats); a body the recorder found at rest (within its ``still_tolerance``, 1e-6 m by
+default: the target, resting rocks) comes back at its first frame's pose for the whole
+episode. Curve values come back exactly, ``NaN`` and ``+-inf`` included.
 """
 
 from __future__ import annotations
@@ -189,9 +191,10 @@ def _episode(
 def read_episodes(path: str | Path) -> list[Episode]:
     """The recorded episodes, in recording order, as ``Episode`` values.
 
-    Poses, times and rewards equal what was recorded bit for bit (after the recorder's
-    frame stride); the world body (index 0) comes back at the origin. An episode cut
-    short by a crash is left out.
+    Times, rewards and moving bodies' poses equal what was recorded bit for bit (after
+    the recorder's frame stride); bodies at rest keep their first frame's pose; the
+    world body (index 0) comes back at the origin. An episode cut short by a crash is
+    left out.
     """
     scan = _scan(path, [TOPIC_EPISODE, TOPIC_TF, TOPIC_STEP])
     infos = [json.loads(m.data) for m in scan.messages[TOPIC_EPISODE]]

@@ -31,9 +31,9 @@ import numpy.typing as npt
 import rerun as rr
 import rerun.blueprint as rrb
 
-from evo.record.base import Episode, RecorderBase
+from evo.record.base import STILL_TOLERANCE, Episode, RecorderBase, check_options, prepare
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
-from evo.record.mcap_file import EPISODE_GAP_NS, RecordError, moving_bodies
+from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
 
 REPLAY = "replay"
@@ -135,6 +135,8 @@ class RerunRecorder(RecorderBase):
             (else the file name) is the recording id.
         flush_every: Send buffered curve rows every this many rows.
         frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
+        still_tolerance: Bodies at rest within this (m, quaternion units) get one
+            transform per episode instead of one per frame.
     """
 
     def __init__(
@@ -143,13 +145,14 @@ class RerunRecorder(RecorderBase):
         model: mujoco.MjModel,
         metadata: Mapping[str, Any],
         *,
-        flush_every: int = 5,
+        flush_every: int = 10,
         frame_stride: int = 1,
+        still_tolerance: float = STILL_TOLERANCE,
     ) -> None:
-        if flush_every < 1 or frame_stride < 1:
-            raise ValueError("flush_every and frame_stride must be >= 1")
+        check_options(flush_every, frame_stride, still_tolerance)
         self.path = Path(path)
         self.flush_every, self.frame_stride = flush_every, frame_stride
+        self.still_tolerance = still_tolerance
         name = str(metadata.get("name", self.path.stem))
         self.rec = open_rrd(self.path, name, eval_blueprint())
         geometry = scene_geometry(model)
@@ -184,30 +187,29 @@ class RerunRecorder(RecorderBase):
 
     def episode(self, episode: Episode) -> None:
         """Send one episode's body poses and rewards on the ``replay`` timeline."""
-        if episode.nbody != len(self.body_names):
-            raise ValueError(
-                f"{self.path}: episode {episode.index} has {episode.nbody} bodies,"
-                f" the model has {len(self.body_names)}"
-            )
-        ep = episode.strided(self.frame_stride)
-        stamps = self._clock_ns + np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
+        frames = prepare(
+            episode,
+            nbody=len(self.body_names),
+            where=self.path,
+            stride=self.frame_stride,
+            tolerance=self.still_tolerance,
+            clock_ns=self._clock_ns,
+        )
+        ep, stamps = frames.episode, frames.stamps
         clock = rr.TimeColumn(REPLAY, duration=stamps.astype("timedelta64[ns]"))
-        moving = np.zeros(ep.nbody, dtype=bool)
-        moving[1:] = moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:])
-        for b in range(1, ep.nbody):
-            frames = slice(None) if moving[b] else slice(0, 1)
-            index = (
-                clock
-                if moving[b]
-                else rr.TimeColumn(REPLAY, duration=stamps[:1].astype("timedelta64[ns]"))
-            )
-            self.rec.send_columns(
-                self.body_paths[b],
-                indexes=[index],
-                columns=rr.Transform3D.columns(
-                    translation=ep.xpos[frames, b], quaternion=ep.xquat[frames, b][:, [1, 2, 3, 0]]
-                ),
-            )
+        start = rr.TimeColumn(REPLAY, duration=stamps[:1].astype("timedelta64[ns]"))
+        for index, bodies, rows in (
+            (clock, frames.moving, slice(None)),
+            (start, frames.still, slice(0, 1)),
+        ):
+            for b in bodies:
+                self.rec.send_columns(
+                    self.body_paths[b],
+                    indexes=[index],
+                    columns=rr.Transform3D.columns(
+                        translation=ep.xpos[rows, b], quaternion=ep.xquat[rows, b][:, [1, 2, 3, 0]]
+                    ),
+                )
         self._send_rewards(ep, clock)
         self._clock_ns = int(stamps[-1]) + EPISODE_GAP_NS
 
