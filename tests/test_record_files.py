@@ -3,6 +3,7 @@ entities, crash safety of a killed writer, and the run-level files."""
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import signal
@@ -20,10 +21,12 @@ from test_record import curve_rows, robot_bodies, scene, simulate  # tests/ is o
 from evo.record import (
     Birth,
     McapRecorder,
+    RecordConfig,
     Recorders,
     RerunRecorder,
     RunRecorder,
     is_complete,
+    open_recorder,
     read_births,
     read_curve,
     read_episodes,
@@ -213,3 +216,24 @@ def test_run_files_hold_births_and_robots(tmp_path: Path) -> None:
         "/robots/snake/label",
     }
     assert expected <= found, f"missing entities: {sorted(expected - found)}"
+
+
+def native_threads() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc")
+def test_many_evaluations_leave_no_threads_behind(tmp_path: Path) -> None:
+    model = build(load_robot(ROOT / "robots/snake.json")).compile()
+    config = RecordConfig()
+
+    def evaluate(i: int) -> None:
+        with open_recorder(config, tmp_path, f"robot-{i}", model, {}) as rec:
+            rec.curve({"env_steps": 1.0, "mean_return": 0.0})
+
+    evaluate(0)  # rerun starts its shared runtime on first use
+    before = native_threads()
+    for i in range(1, 6):
+        evaluate(i)
+    assert native_threads() <= before, "recorders leak threads in a long-lived worker"
+    assert cli("rrd", "verify", tmp_path / "robot-5.rrd").returncode == 0

@@ -30,12 +30,14 @@ import numpy as np
 import numpy.typing as npt
 import rerun as rr
 import rerun.blueprint as rrb
+import rerun_bindings
 
 from evo.record.base import STILL_TOLERANCE, Episode, RecorderBase, check_options, prepare
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
 from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
 
+APPLICATION = "evo"
 REPLAY = "replay"
 ENV_STEP = "env_step"
 SCENE = "scene"
@@ -113,12 +115,64 @@ def eval_blueprint() -> rrb.Blueprint:
     )
 
 
+def finish_rrd(rec: rr.RecordingStream) -> None:
+    """Write everything logged to ``rec``'s file and close it (with its footer)."""
+    try:
+        rec.flush()
+    finally:
+        rec.disconnect()
+
+
+def release_streams() -> None:
+    """Free the threads of recording streams nothing refers to any more.
+
+    rerun keeps a dropped stream's batcher threads alive until such a sweep (``rr.init``
+    does one); without it every evaluation would leave idle threads behind in a
+    long-lived worker process.
+    """
+    rerun_bindings.flush_and_cleanup_orphaned_recordings()
+
+
+def _save(rec: rr.RecordingStream, path: Path, blueprint: rrb.Blueprint) -> None:
+    """``rec.save(path, default_blueprint=blueprint)`` without its thread leak.
+
+    ``RecordingStream.save`` turns the blueprint into a temporary blueprint stream that
+    rerun 0.41 never frees (two idle threads per call, so per evaluation in a long-lived
+    worker). The same steps done here let that stream be closed. Falls back to the
+    public call should rerun's internals change.
+    """
+    try:
+        stream = rr.RecordingStream._from_native(
+            rerun_bindings.new_blueprint(
+                application_id=APPLICATION,
+                make_default=False,
+                make_thread_default=False,
+                default_enabled=True,
+            )
+        )
+    except (AttributeError, TypeError):
+        rec.save(path, default_blueprint=blueprint)
+        return
+    try:
+        stream.set_time("blueprint", sequence=0)
+        blueprint._log_to_stream(stream)
+        memory = stream.memory_recording()
+        rerun_bindings.save(
+            path=str(path),
+            default_blueprint=memory.storage,
+            recording=rec.to_native(),
+            write_footer=True,
+        )
+    finally:
+        stream.disconnect()
+
+
 def open_rrd(path: Path, recording_id: str, blueprint: rrb.Blueprint) -> rr.RecordingStream:
     """A recording stream saving to ``path`` (parent folders made, file replaced)."""
-    rec = rr.RecordingStream("evo", recording_id=recording_id)
+    rec = rr.RecordingStream(APPLICATION, recording_id=recording_id)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        rec.save(path, default_blueprint=blueprint)
+        _save(rec, path, blueprint)
     except Exception as err:
         raise RecordError(f"{path}: cannot create the .rrd file: {err}") from err
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -154,13 +208,20 @@ class RerunRecorder(RecorderBase):
         self.flush_every, self.frame_stride = flush_every, frame_stride
         self.still_tolerance = still_tolerance
         name = str(metadata.get("name", self.path.stem))
-        self.rec = open_rrd(self.path, name, eval_blueprint())
+        self._rec: rr.RecordingStream | None = open_rrd(self.path, name, eval_blueprint())
         geometry = scene_geometry(model)
         self.body_names = geometry.body_names
         self.body_paths = log_bodies(self.rec, SCENE, geometry)
         log_text(self.rec, "metadata", metadata)
         self._rows: list[Mapping[str, float]] = []
         self._clock_ns = 0
+
+    @property
+    def rec(self) -> rr.RecordingStream:
+        """The open recording stream."""
+        if self._rec is None:
+            raise RecordError(f"{self.path}: the recorder is closed")
+        return self._rec
 
     def curve(self, row: Mapping[str, float]) -> None:
         """Buffer one learning-curve row; send the buffer every ``flush_every`` rows."""
@@ -240,6 +301,8 @@ class RerunRecorder(RecorderBase):
         try:
             self._send_curve()
             log_text(self.rec, "summary", summary)
-            self.rec.flush()
         finally:
-            self.rec.disconnect()
+            if self._rec is not None:
+                finish_rrd(self._rec)
+            self._rec = None  # the last reference: rerun may now free the stream
+            release_streams()

@@ -34,7 +34,7 @@ from evo.record.geometry import Geometry, rest_pose, scene_geometry
 from evo.record.mcap_file import McapFile, scene_entity
 from evo.record.readback import read_json_topic
 from evo.record.rows import flatten, json_number, plain
-from evo.record.rrd import entity, log_geometry, open_rrd
+from evo.record.rrd import entity, finish_rrd, log_geometry, open_rrd, release_streams
 
 TOPIC_BIRTHS = "/ga/births"
 TOPIC_ROBOTS = "/ga/robots"
@@ -228,8 +228,9 @@ class RunRecorder:
                 self.mcap.close(summary or {})
         finally:
             if self.rec is not None:
-                self.rec.flush()
-                self.rec.disconnect()
+                finish_rrd(self.rec)
+                self.rec = None
+                release_streams()
 
     def __enter__(self) -> Self:
         return self
