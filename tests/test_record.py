@@ -341,6 +341,8 @@ def test_metadata_and_summary_read_back(tmp_path: Path) -> None:
     rec.close({"fitness": 1.0})  # a second close does nothing
     assert read_metadata(path) == {**metadata, "fitness": -0.125, "episodes": 40}
     assert is_complete(path)
+    with pytest.raises(RecordError, match="m.mcap: the recorder is closed"):
+        rec.curve({"env_steps": 1.0})
 
 
 def test_exception_inside_with_closes_the_file(tmp_path: Path) -> None:

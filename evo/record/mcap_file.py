@@ -287,12 +287,17 @@ class McapRecorder(RecorderBase):
 
     def curve(self, row: Mapping[str, float]) -> None:
         """Write one learning-curve row; flush every ``flush_every`` rows."""
+        self._check_open()
         if "env_steps" not in row:
             raise KeyError(f"{self.path}: a curve row needs 'env_steps', got {list(row)}")
         self._curve.log(encode_row(row), log_time=self._clock_ns)
         self._rows += 1
         if self._rows % self.flush_every == 0:
             self.file.flush()
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RecordError(f"{self.path}: the recorder is closed")
 
     def _encoder(self, names: tuple[str, ...]) -> TransformEncoder:
         if names not in self._encoders:
@@ -305,6 +310,7 @@ class McapRecorder(RecorderBase):
         Bodies at rest (the target, resting rocks; see ``still_tolerance``) get one
         transform at the episode's start instead of one per frame.
         """
+        self._check_open()
         frames = prepare(
             episode,
             nbody=len(self.body_names),
