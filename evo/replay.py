@@ -25,9 +25,9 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from evo.config import ConfigError, typed
-from evo.envs.task import EnvConfig
+from evo.envs.task import EnvConfig, Trajectory
 from evo.learners.common import load_checkpoint
-from evo.learners.rollouts import Played, play
+from evo.learners.rollouts import play
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import RobotFileError, load_robot
 from evo.robot.render import RenderError, make_renderer
@@ -62,7 +62,7 @@ def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
 
 def write_video(
     model: mujoco.MjModel,
-    episodes: Sequence[Played],
+    episodes: Sequence[Trajectory],
     path: Path,
     width: int = 640,
     height: int = 480,
@@ -95,7 +95,7 @@ def write_video(
 
 def replay(
     run_dir: Path, name: str | None, episodes: int, seed: int, video: Path | None, rrd: Path | None
-) -> list[Played]:
+) -> list[Trajectory]:
     """Re-simulate ``episodes`` deterministic episodes and write the requested files."""
     physics, env = _run_config(run_dir)
     robot, policy_path = _files(run_dir, name)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 import time
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -104,6 +105,64 @@ class Step:
     episode_length: npt.NDArray[np.int64]
 
 
+@dataclass(frozen=True)
+class Trajectory:
+    """One finished episode of the watched arena; one row per frame (0 = the start).
+
+    Attributes:
+        time: Sim time of every frame, s.
+        xpos: World position of every body of the scene, (T, nbody, 3).
+        xquat: World orientation of every body, (T, nbody, 4), w x y z.
+        qpos: Joint positions, (T, nq): with the target, enough to redraw every frame.
+        target: The target, (3,).
+        rewards: Each reward term per frame (0 at frame 0).
+        success: Whether the robot reached the target.
+    """
+
+    time: F64
+    xpos: F64
+    xquat: F64
+    qpos: F64
+    target: F64
+    rewards: dict[str, F64]
+    success: bool
+
+    @property
+    def total_return(self) -> float:
+        """Sum of every reward term over the episode."""
+        return float(sum(v.sum() for v in self.rewards.values()))
+
+
+class _Tracer:
+    """Frames of the watched arena's running episode."""
+
+    def __init__(self, core: ReachCore, callback: Callable[[Trajectory], None]) -> None:
+        self.core, self.callback = core, callback
+        self.frames: list[tuple[float, F64, F64, F64, dict[str, float]]] = []
+
+    def frame(self, terms: dict[str, float]) -> None:
+        xpos, xquat = self.core.poses(0)
+        state = self.core.state[0]
+        self.frames.append((float(state[0]), xpos, xquat, self.core.qpos[0].copy(), terms))
+
+    def finish(self, success: bool) -> None:
+        if not self.frames:
+            return
+        time, xpos, xquat, qpos, terms = zip(*self.frames, strict=True)
+        self.frames = []
+        self.callback(
+            Trajectory(
+                time=np.array(time),
+                xpos=np.stack(xpos),
+                xquat=np.stack(xquat),
+                qpos=np.stack(qpos),
+                target=self.core.target[0].copy(),
+                rewards={k: np.array([t[k] for t in terms]) for k in REWARD_TERMS},
+                success=success,
+            )
+        )
+
+
 def build_scene(
     robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
 ) -> BuiltRobot:
@@ -156,6 +215,8 @@ class ReachCore:
         self.unstable_count = 0
         self.warning_count = 0
         self.physics_seconds = 0.0
+        self.steps_taken = 0  # env steps over all arenas since construction
+        self._tracer: _Tracer | None = None
 
     # ---- set-up -------------------------------------------------------------------------
     def _index_model(self) -> None:
@@ -226,6 +287,11 @@ class ReachCore:
         nq = self.model.nq
         return self.state[:, 1 + nq : 1 + nq + self.model.nv]
 
+    def watch(self, callback: Callable[[Trajectory], None] | None) -> None:
+        """Trace every episode of arena 0 from its next reset; ``callback`` receives each
+        one when it ends (None stops tracing). Costs one forward kinematics per step."""
+        self._tracer = None if callback is None else _Tracer(self, callback)
+
     def seed(self, seed: int | None) -> None:
         """Re-seed the random targets and rocks."""
         self.rng = np.random.default_rng(seed)
@@ -257,6 +323,9 @@ class ReachCore:
         observation, distance = self._observe()
         self.observation[chosen] = observation[chosen]
         self.distance[chosen] = distance[chosen]
+        if self._tracer is not None and (mask is None or mask[0]):
+            self._tracer.frames = []
+            self._tracer.frame(dict.fromkeys(REWARD_TERMS, 0.0))
         return self.observation.copy()
 
     def set_target(self, arena: int, position: npt.ArrayLike) -> npt.NDArray[np.float32]:
@@ -310,14 +379,20 @@ class ReachCore:
         }
         reward = terms["time"] + terms["approach"] + terms["success"]
         self.steps += 1
+        self.steps_taken += self.num_envs
         self.returns += reward
         self.unstable_count += int(unstable.sum())
+        truncated = unstable | (self.steps >= self.task.t_max)
+        if self._tracer is not None and self._tracer.frames:
+            self._tracer.frame({name: float(terms[name][0]) for name in REWARD_TERMS})
+            if success[0] or truncated[0]:
+                self._tracer.finish(bool(success[0]))
         return Step(
             observation=self.observation.copy(),
             reward=reward,
             terms=terms,
             terminated=success,
-            truncated=unstable | (self.steps >= self.task.t_max),
+            truncated=truncated,
             success=success,
             unstable=unstable,
             episode_return=self.returns.copy(),

@@ -21,7 +21,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
-from evo.envs.task import EnvConfig
+from evo.envs.task import EnvConfig, Trajectory
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -275,6 +275,7 @@ class Learner(Protocol):
         budget: int,
         seed: int,
         on_curve: Callable[[dict[str, float]], None] | None = None,
+        on_episode: Callable[[Trajectory, int], None] | None = None,
     ) -> TrainResult: ...
 
 

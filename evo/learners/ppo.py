@@ -36,13 +36,15 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from evo.envs.reach import make_env
-from evo.envs.task import REWARD_TERMS, EnvConfig
+from evo.envs.task import REWARD_TERMS, EnvConfig, Trajectory
 from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
 CurveHook = Callable[[dict[str, float]], None]
 """Called with every learning-curve row as soon as it exists (recorders, progress)."""
+EpisodeHook = Callable[[Trajectory, int], None]
+"""Called with every finished episode of arena 0 and the env-step count at its end."""
 
 _LOSS_KEYS = {
     "loss/objective": "loss_objective",
@@ -110,18 +112,20 @@ def train(
     budget: int,
     seed: int,
     on_curve: CurveHook | None = None,
+    on_episode: EpisodeHook | None = None,
 ) -> TrainResult:
     """Train ``robot``'s behaviour for ``budget`` env steps (or only collect, if
     ``config.update`` is false) and return its fitness, curve and policy.
 
     Randomness comes only from ``seed`` (targets, rocks, network initialisation, action
-    noise, minibatch order); torch's global generator is left as it was.
+    noise, minibatch order); torch's global generator is left as it was. ``on_curve``
+    gets every curve row, ``on_episode`` every episode of arena 0 frame by frame.
     """
     if budget < 1:
         raise ValueError(f"budget must be >= 1 env step, got {budget}")
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return _train(robot, physics, env, config, budget, seed, on_curve)
+        return _train(robot, physics, env, config, budget, seed, on_curve, on_episode)
 
 
 def _train(
@@ -132,9 +136,13 @@ def _train(
     budget: int,
     seed: int,
     on_curve: CurveHook | None,
+    on_episode: EpisodeHook | None,
 ) -> TrainResult:
     start = time.perf_counter()
     env = make_env(robot, physics, env_config, config.num_envs, seed)
+    if on_episode is not None:
+        core = env.core
+        core.watch(lambda episode: on_episode(episode, int(core.steps_taken)))
     policy = make_policy(env.core.obs_size, env.core.action_size, config)
     loss = ClipPPOLoss(
         policy.actor,

@@ -11,7 +11,7 @@ import dataclasses
 
 from evo.envs.task import EnvConfig
 from evo.learners.common import LearnerConfig, TrainResult
-from evo.learners.ppo import CurveHook
+from evo.learners.ppo import CurveHook, EpisodeHook
 from evo.learners.ppo import train as train_ppo
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -26,9 +26,9 @@ def train(
     budget: int,
     seed: int,
     on_curve: CurveHook | None = None,
+    on_episode: EpisodeHook | None = None,
 ) -> TrainResult:
     """Collect ``budget`` env steps with the initial, never-updated policy."""
     frozen = dataclasses.replace(config, update=False)
-    return train_ppo(
-        robot, physics=physics, env=env, config=frozen, budget=budget, seed=seed, on_curve=on_curve
-    )
+    return train_ppo(robot, physics=physics, env=env, config=frozen, budget=budget, seed=seed,
+                     on_curve=on_curve, on_episode=on_episode)
