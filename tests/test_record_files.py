@@ -31,6 +31,7 @@ from evo.record import (
     read_curve,
     read_episodes,
     read_metadata,
+    write_replay_rrd,
 )
 from evo.robot import load_robot
 from evo.robot.builder import build
@@ -237,3 +238,14 @@ def test_many_evaluations_leave_no_threads_behind(tmp_path: Path) -> None:
         evaluate(i)
     assert native_threads() <= before, "recorders leak threads in a long-lived worker"
     assert cli("rrd", "verify", tmp_path / "robot-5.rrd").returncode == 0
+
+
+def test_replays_become_rrd_files(tmp_path: Path) -> None:
+    model = scene(n_rocks=1)
+    robot = load_robot(ROOT / "robots/four_wheeler.json")
+    played = [simulate(model, frames=30, seed=s) for s in (0, 1)]
+    path = write_replay_rrd(model, robot, played, tmp_path / "replay.rrd")
+    assert cli("rrd", "verify", path).returncode == 0
+    found = entities(path)
+    assert {"/scene/brain", "/episode/return", "/metadata/name", "/metadata/robot"} <= found
+    assert robot.name in cli("rrd", "print", "-vvv", path).stdout

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
         read_json_topic,
         read_metadata,
     )
+    from evo.record.replay import write_replay_rrd
     from evo.record.rrd import RerunRecorder
     from evo.record.run import Birth, RunRecorder, read_births
 
@@ -44,6 +45,7 @@ _LAZY = {
     "read_json_topic": "evo.record.readback",
     "read_metadata": "evo.record.readback",
     "RerunRecorder": "evo.record.rrd",
+    "write_replay_rrd": "evo.record.replay",
     "Birth": "evo.record.run",
     "RunRecorder": "evo.record.run",
     "read_births": "evo.record.run",
@@ -71,6 +73,7 @@ __all__ = [
     "read_metadata",
     "scene_geometry",
     "should_record",
+    "write_replay_rrd",
 ]
 
 
