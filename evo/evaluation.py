@@ -7,15 +7,19 @@ error, and the evolution loop records it and goes on.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from evo.envs.task import EnvConfig
+from evo.envs.task import EnvConfig, Trajectory, build_scene
 from evo.learners.common import LearnerConfig, get_learner, save_checkpoint
+from evo.learners.rollouts import play
+from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import parse_robot
+from evo.robot.tree import Robot
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,6 +31,8 @@ class Job:
     learner: LearnerConfig
     run_dir: str
     method: str = "E+L"
+    record: RecordConfig = field(default_factory=RecordConfig)
+    config_yaml: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,39 +72,84 @@ class Outcome:
     extra: dict[str, float] = field(default_factory=dict)
 
 
+class EpisodeSampler:
+    """Passes the episodes the record config asks for to the recorder.
+
+    Every episode of the traced arena comes through here; the chosen ones are recorded
+    at once, and the latest other one is held back in case it turns out to be the last
+    (``finish``). Episodes cut short by a numerical blow-up (MuJoCo resets the arena,
+    time jumps back) are counted but never recorded.
+    """
+
+    def __init__(self, recorder: Recorder, config: RecordConfig) -> None:
+        self.recorder, self.config = recorder, config
+        self.count = 0
+        self.held: Episode | None = None
+
+    def __call__(self, trajectory: Trajectory, env_step: int) -> None:
+        index, self.count = self.count, self.count + 1
+        if len(trajectory.time) > 1 and not (trajectory.time[1:] > trajectory.time[:-1]).all():
+            return
+        episode = to_episode(trajectory, index, env_step)
+        if should_record(self.config, index, is_last=False):
+            self.recorder.episode(episode)
+            self.held = None
+        else:
+            self.held = episode
+
+    def finish(self) -> None:
+        """Record the last episode if the config asks for it and it is not recorded."""
+        if self.held is not None and should_record(self.config, self.held.index, is_last=True):
+            self.recorder.episode(self.held)
+        self.held = None
+
+
+def to_episode(trajectory: Trajectory, index: int, env_step: int) -> Episode:
+    """The recorder's view of one traced episode."""
+    return Episode(index=index, env_step=env_step, time=trajectory.time, xpos=trajectory.xpos,
+                   xquat=trajectory.xquat, target=trajectory.target,
+                   rewards=trajectory.rewards, success=trajectory.success)
+
+
 def evaluate(task: Task, job: Job) -> Outcome:
-    """Train ``task``'s robot for its budget; write ``evals/<name>.pt`` and ``.csv``."""
+    """Train ``task``'s robot for its budget; write ``evals/<name>.pt``, ``.csv`` and the
+    recordings (``.mcap``, ``.rrd``) the record config asks for."""
     import json
 
     start = time.perf_counter()
     try:
         robot = parse_robot(json.loads(task.robot), source=task.name)
-        train = get_learner(job.learner)
-        result = train(
-            robot,
-            physics=job.physics,
-            env=job.env,
-            config=job.learner,
-            budget=task.budget,
-            seed=task.seed,
+        outcome = _train_and_record(robot, task, job)
+    except Exception:  # noqa: BLE001 - any failure is recorded and the run goes on
+        return Outcome(task.birth, task.name, wall_seconds=time.perf_counter() - start,
+                       error=traceback.format_exc(limit=8))
+    return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
+
+
+def _train_and_record(robot: Robot, task: Task, job: Job) -> Outcome:
+    evals = Path(job.run_dir) / "evals"
+    evals.mkdir(parents=True, exist_ok=True)
+    model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
+    metadata = {
+        "robot": task.robot, "config": job.config_yaml, "seed": task.seed,
+        "method": job.method, "birth": task.birth, "budget": task.budget,
+        "parents": list(task.parents), "replay_seed": task.seed,
+    }
+    with open_recorder(job.record, evals, task.name, model, metadata) as recorder:
+        sampler = EpisodeSampler(recorder, job.record)
+        result = get_learner(job.learner)(
+            robot, physics=job.physics, env=job.env, config=job.learner, budget=task.budget,
+            seed=task.seed, on_curve=recorder.curve,
+            on_episode=sampler if job.record.enabled else None,
         )
-        evals = Path(job.run_dir) / "evals"
-        evals.mkdir(parents=True, exist_ok=True)
+        sampler.finish()
+        if job.record.enabled:  # one deterministic episode, as `evo.replay` re-plays it
+            _, (final,) = play(robot, result.policy, physics=job.physics, env=job.env,
+                               seed=task.seed)
+            recorder.episode(to_episode(final, sampler.count, result.env_steps))
         result.curve.to_csv(evals / f"{task.name}.csv", index=False)
         save_checkpoint(result.policy, evals / f"{task.name}.pt", job.learner)
-    except Exception:  # noqa: BLE001 - any failure is recorded and the run goes on
-        return Outcome(
-            task.birth,
-            task.name,
-            wall_seconds=time.perf_counter() - start,
-            error=traceback.format_exc(limit=8),
-        )
-    return Outcome(
-        task.birth,
-        task.name,
-        fitness=result.fitness,
-        env_steps=result.env_steps,
-        episodes=result.episodes,
-        wall_seconds=time.perf_counter() - start,
-        extra={"unstable": float(result.unstable)},
-    )
+        recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
+                        "episodes": result.episodes, "status": "complete"})
+    return Outcome(task.birth, task.name, fitness=result.fitness, env_steps=result.env_steps,
+                   episodes=result.episodes, extra={"unstable": float(result.unstable)})
