@@ -167,15 +167,19 @@ def _save(rec: rr.RecordingStream, path: Path, blueprint: rrb.Blueprint) -> None
         stream.disconnect()
 
 
-def open_rrd(path: Path, recording_id: str, blueprint: rrb.Blueprint) -> rr.RecordingStream:
-    """A recording stream saving to ``path`` (parent folders made, file replaced)."""
+def open_rrd(
+    path: Path, recording_id: str, blueprint: rrb.Blueprint, scene_root: str
+) -> rr.RecordingStream:
+    """A recording stream saving to ``path`` (parent folders made, file replaced), with
+    z up at the root and at ``scene_root`` (the 3D view's origin)."""
     rec = rr.RecordingStream(APPLICATION, recording_id=recording_id)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         _save(rec, path, blueprint)
     except Exception as err:
         raise RecordError(f"{path}: cannot create the .rrd file: {err}") from err
-    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    for root in ("/", scene_root):
+        rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     return rec
 
 
@@ -208,7 +212,9 @@ class RerunRecorder(RecorderBase):
         self.flush_every, self.frame_stride = flush_every, frame_stride
         self.still_tolerance = still_tolerance
         name = str(metadata.get("name", self.path.stem))
-        self._rec: rr.RecordingStream | None = open_rrd(self.path, name, eval_blueprint())
+        self._rec: rr.RecordingStream | None = open_rrd(
+            self.path, name, eval_blueprint(), f"/{SCENE}"
+        )
         geometry = scene_geometry(model)
         self.body_names = geometry.body_names
         self.body_paths = log_bodies(self.rec, SCENE, geometry)

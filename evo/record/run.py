@@ -140,11 +140,15 @@ class RunRecorder:
         self.directory = Path(directory)
         meta = dict(metadata or {})
         self.mcap = McapFile(self.directory / "run.mcap", meta) if mcap else None
-        self.rec = (
-            open_rrd(self.directory / "run.rrd", str(meta.get("name", "run")), _blueprint())
-            if rerun
-            else None
-        )
+        self.rec: rr.RecordingStream | None = None
+        if rerun:
+            try:
+                name = str(meta.get("name", "run"))
+                self.rec = open_rrd(self.directory / "run.rrd", name, _blueprint(), "/robots")
+            except BaseException:
+                if self.mcap is not None:
+                    self.mcap.close({"status": "failed", "error": "could not open run.rrd"})
+                raise
         self._robots = 0
         self._last_birth = 0
         self.closed = False
