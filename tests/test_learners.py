@@ -117,3 +117,9 @@ def test_random_learner_never_changes_its_weights(ppo_run, random_run) -> None: 
     trained = ppo_run.policy.state_dict()["actor"]
     assert any(not torch.equal(trained[k], v) for k, v in start["actor"].items())
     assert np.isnan(random_run.curve["loss/objective"]).all()
+
+
+def test_mean_action_is_the_deterministic_action(ppo_run) -> None:  # noqa: ANN001
+    obs = torch.randn(32, FOUR_WHEELER.obs_size) * 3
+    torch.testing.assert_close(ppo_run.policy.mean_action(obs),
+                               act_deterministic(ppo_run.policy, obs), rtol=0, atol=0)

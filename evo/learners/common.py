@@ -177,6 +177,14 @@ class Policy:
     actor: ProbabilisticActor
     critic: ValueOperator
 
+    @torch.no_grad()
+    def mean_action(self, observation: torch.Tensor) -> torch.Tensor:
+        """The Gaussian's mean for ``observation``: the deterministic action, computed
+        without TensorDict bookkeeping (for step-by-step play)."""
+        loc, _ = self.actor.module[0].module(observation)
+        action: torch.Tensor = loc
+        return action
+
     def state_dict(self) -> dict[str, Any]:
         """Everything a checkpoint needs (tensors and plain numbers only)."""
         head = self.actor.module[0].module

@@ -12,7 +12,6 @@ import torch
 
 from evo.envs.task import EnvConfig, ReachCore, Trajectory
 from evo.learners.common import Policy
-from evo.learners.ppo import act_deterministic
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -38,7 +37,7 @@ def play(
         observation = core.reset()
         done = False
         while not done:
-            step = core.step(act_deterministic(policy, torch.from_numpy(observation)).numpy())
+            step = core.step(policy.mean_action(torch.from_numpy(observation)).numpy())
             observation = step.observation
             done = bool(step.terminated[0] or step.truncated[0])
     core.watch(None)
