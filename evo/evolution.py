@@ -5,6 +5,8 @@ initial random robot while the population is not full, then an offspring bred fr
 population as it stands), and whenever one finishes, apply steady-state replacement,
 record it, and save the state. Stop once ``robot_budget`` robots have been evaluated.
 With one worker this is the paper's loop; with more it is an asynchronous steady state.
+When breeding finds no new valid child (parents too small to cross over, or a converged
+population), the next robot is a fresh random one (operator ``random-fallback``).
 
 Resumable: the whole state (population, history, breeding RNG, next birth, robots in
 flight) is written atomically to ``state.json`` after every submission and every
@@ -33,12 +35,40 @@ import numpy as np
 import pandas as pd
 
 from evo.components.executors import EvalExecutor
-from evo.components.ga import BudgetSchedule, Member, ReplaceWorst, StructureStrategy
+from evo.components.ga import (
+    BudgetSchedule,
+    Member,
+    Offspring,
+    ReplaceWorst,
+    StructureStrategy,
+)
 from evo.evaluation import Job, Outcome, Task, evaluate
 from evo.learners.session import write_json
 from evo.robot.io import load_robot, save_robot
+from evo.robot.operators import OperatorError
 
 STATE_VERSION = 1
+HISTORY_COLUMNS = (
+    "birth",
+    "name",
+    "method",
+    "parents",
+    "operator",
+    "budget",
+    "seed",
+    "fitness",
+    "accepted",
+    "replaced",
+    "env_steps",
+    "episodes",
+    "wall_seconds",
+    "error",
+    "population_best",
+    "population_mean",
+)
+"""The columns of history.csv, in order (one row per evaluated robot)."""
+RANDOM_FALLBACK = "random-fallback"
+"""History ``operator`` of a random robot made because breeding found no valid child."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,7 +163,14 @@ class Evolution:
         if len(self.population) < self.ga.population_size:
             offspring = self.strategy.initial(self.rng)
         else:
-            offspring = self.strategy.breed(self.population, self.rng)
+            try:
+                offspring = self.strategy.breed(self.population, self.rng)
+            except OperatorError:
+                # No parent pair gave a new valid child (tiny robots have no crossover
+                # site; a converged population gives its parents back): a fresh random
+                # robot keeps the run going, marked in the history's operator column.
+                fresh = self.strategy.initial(self.rng)
+                offspring = Offspring(fresh.robot, (), RANDOM_FALLBACK)
         taken = {row["name"] for row in self.history} | {t.name for t in self.pending}
         name = (
             offspring.robot.name
@@ -218,7 +255,7 @@ class Evolution:
         write_json(self.run_dir / "state.json", state)
         if self.history:
             tmp = self.run_dir / "history.csv.tmp"
-            pd.DataFrame(self.history).to_csv(tmp, index=False)
+            pd.DataFrame(self.history, columns=list(HISTORY_COLUMNS)).to_csv(tmp, index=False)
             tmp.replace(self.run_dir / "history.csv")
         write_json(self.run_dir / "population.json", {"population": state["population"]})
         write_json(self.run_dir / "summary.json", self.summary())
@@ -251,6 +288,8 @@ class Evolution:
             raise ValueError(f"{path}: no saved state; is this an evo run directory?") from None
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(f"{path}: unreadable run state ({err})") from None
+        # The run may have stopped between the state and the files derived from it.
+        self._save()
 
     def summary(self) -> dict[str, Any]:
         """Robots evaluated, the best robot, env steps and speed so far."""
