@@ -109,10 +109,17 @@ class LocalExecutor:
         return self._get().submit(fn, *args)
 
     def restart(self) -> None:
-        """Replace a broken pool (a worker died) with a fresh one."""
-        if self._pool is not None:
+        """Replace a broken pool (a worker died) with a fresh one; a healthy pool stays.
+
+        Every evaluation in flight when a worker dies fails, and their futures may come
+        back one at a time, each followed by a call here: by then the pool may already
+        be a fresh one, running newer evaluations that must not be cancelled.
+        """
+        # ``_broken`` is set by ProcessPoolExecutor once a worker died (assume broken
+        # should a future Python drop the attribute).
+        if self._pool is not None and getattr(self._pool, "_broken", True):
             self._pool.shutdown(wait=False, cancel_futures=True)
-        self._pool = None
+            self._pool = None
 
     def shutdown(self) -> None:
         if self._pool is not None:
