@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import hydra
@@ -25,7 +26,14 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from evo.components.ga import Evolve, RandomStructures, StructureStrategy
+from evo.components.executors import EvalExecutor
+from evo.components.ga import (
+    BudgetSchedule,
+    Evolve,
+    RandomStructures,
+    ReplaceWorst,
+    StructureStrategy,
+)
 from evo.config import ConfigError, instantiate, typed
 from evo.envs.task import EnvConfig
 from evo.evaluation import Job
@@ -116,10 +124,41 @@ def run_evaluate(cfg: DictConfig, out: Path) -> None:
         raise ConfigError(f"checkpoint: {err}") from None
 
 
+GA_KEYS = frozenset(
+    {
+        "population_size",
+        "robot_budget",
+        "structure",
+        "selection",
+        "replacement",
+        "schedule",
+        "crossover_tries",
+        "parent_tries",
+        "mutation_rate",
+        "mutation_operators",
+    }
+)
+"""Every key of the ``ga`` group (conf/ga/steady_state.yaml)."""
+
+
+def method_label(structure: str, learns: bool) -> str:
+    """The ablation's method name (paper section 8): ``E+L``, ``E+R``, ``R+L`` or ``R+R``."""
+    return f"{structure}+{'L' if learns else 'R'}"
+
+
+# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir.
+if not OmegaConf.has_resolver("evo_method"):
+    OmegaConf.register_new_resolver("evo_method", method_label)
+
+
 def _strategy(cfg: DictConfig) -> StructureStrategy:
     generator = typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
     limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
     g = cfg.ga
+    unknown = sorted(set(map(str, g.keys())) - GA_KEYS)
+    if unknown:
+        expected = ", ".join(sorted(GA_KEYS))
+        raise ConfigError(f"ga: unknown key(s) {', '.join(unknown)}; expected some of {expected}")
     if g.structure == "R":
         return RandomStructures(generator, limits)
     if g.structure != "E":
@@ -139,29 +178,55 @@ def _strategy(cfg: DictConfig) -> StructureStrategy:
     )
 
 
+@dataclass(frozen=True)
+class EvolveParts:
+    """The typed objects an evolution run is made of (what ``task=evolve`` builds)."""
+
+    ga: GAConfig
+    strategy: StructureStrategy
+    replacement: ReplaceWorst
+    schedule: BudgetSchedule
+    job: Job
+    executor: EvalExecutor
+
+
+def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
+    """Build and check everything ``task=evolve`` needs, before anything runs.
+
+    Raises:
+        ConfigError: naming the key of the first bad value.
+    """
+    learner = typed(LearnerConfig, cfg.learner, "learner")
+    strategy = _strategy(cfg)
+    ga = typed(GAConfig, {k: cfg.ga[k] for k in ("population_size", "robot_budget")}, "ga")
+    method = method_label(strategy.code, learner.update)
+    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method)
+    replacement = instantiate(cfg.ga.replacement, "ga.replacement")
+    if not isinstance(replacement, ReplaceWorst):
+        raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")
+    schedule = instantiate(cfg.ga.schedule, "ga.schedule")
+    if not isinstance(schedule, BudgetSchedule):
+        raise ConfigError(f"ga.schedule: expected a BudgetSchedule, got {type(schedule)}")
+    executor = instantiate(cfg.executor, "executor")  # last: Ray starts here
+    return EvolveParts(ga, strategy, replacement, schedule, job, executor)
+
+
 def run_evolve(cfg: DictConfig, out: Path) -> None:
     """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues."""
     from evo.progress import evolution_progress, print_summary
 
     if cfg.resume is not None:
         cfg = _resumed_config(Path(str(cfg.resume)))
-    learner = typed(LearnerConfig, cfg.learner, "learner")
-    strategy = _strategy(cfg)
-    ga = typed(GAConfig, {k: cfg.ga[k] for k in ("population_size", "robot_budget")}, "ga")
-    method = f"{strategy.code}+{'L' if learner.update else 'R'}"
-    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method)
-    replacement = instantiate(cfg.ga.replacement, "ga.replacement")
-    schedule = instantiate(cfg.ga.schedule, "ga.schedule")
-    executor = instantiate(cfg.executor, "executor")
-    with evolution_progress(ga.robot_budget, method) as show:
+    parts = evolve_parts(cfg, out)
+    with evolution_progress(parts.ga.robot_budget, parts.job.method) as show:
         evolution = Evolution(
             out,
-            ga=ga,
-            strategy=strategy,
-            replacement=replacement,
-            schedule=schedule,
-            job=job,
-            executor=executor,
+            ga=parts.ga,
+            strategy=parts.strategy,
+            replacement=parts.replacement,
+            schedule=parts.schedule,
+            job=parts.job,
+            executor=parts.executor,
             seed=int(cfg.seed),
             on_result=show,
         )
@@ -180,10 +245,34 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     path = run_dir / "config.yaml"
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
+    extra = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+    if extra:
+        raise ConfigError(
+            f"resume: a resumed run keeps the config it was started with ({path}); "
+            f"drop the other overrides: {' '.join(extra)}"
+        )
     loaded = OmegaConf.load(path)
     assert isinstance(loaded, DictConfig)
     loaded.resume = None
     return loaded
+
+
+def _write_config(cfg: DictConfig, out: Path) -> None:
+    """Save the resolved config in the run directory.
+
+    A directory that already holds an evolution state (the same command run again, e.g.
+    a requeued cluster job or a stopped sweep started again with the same
+    ``hydra.sweep.dir``) is continued only when the config is the same; anything else
+    would mix two runs in one directory.
+    """
+    text = OmegaConf.to_yaml(cfg, resolve=True)
+    path = out / "config.yaml"
+    if (out / "state.json").exists() and path.is_file() and path.read_text() != text:
+        raise ConfigError(
+            f"hydra.run.dir: {out} already holds a run with another config; continue it "
+            f"with resume={out}, or choose a new output directory"
+        )
+    path.write_text(text)
 
 
 TASKS: dict[str, Callable[[DictConfig, Path], None]] = {
@@ -207,7 +296,7 @@ def main(cfg: DictConfig) -> None:
             raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
         torch.set_num_threads(threads)
         if cfg.resume is None:
-            (out / "config.yaml").write_text(OmegaConf.to_yaml(cfg, resolve=True))
+            _write_config(cfg, out)
         task(cfg, out)
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)
@@ -215,10 +304,20 @@ def main(cfg: DictConfig) -> None:
 
 
 def _resume_in_place(argv: list[str]) -> list[str]:
-    """``resume=DIR`` runs in DIR itself: Hydra writes nothing anywhere else."""
+    """``resume=DIR`` runs in DIR itself: Hydra writes nothing anywhere else.
+
+    A DIR that is not a run directory ends here, before Hydra would create it.
+    """
     for arg in argv:
         if arg.startswith("resume=") and arg != "resume=null":
             run_dir = arg.split("=", 1)[1]
+            if not (Path(run_dir) / "config.yaml").is_file():
+                print(
+                    f"error: bad config: resume: {run_dir} is not an evo run directory "
+                    "(no config.yaml)",
+                    file=sys.stderr,
+                )
+                sys.exit(2)
             return [*argv, f"hydra.run.dir={run_dir}", "hydra.output_subdir=null"]
     return argv
 
