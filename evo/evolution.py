@@ -44,6 +44,9 @@ from evo.components.ga import (
 )
 from evo.evaluation import Job, Outcome, Task, evaluate
 from evo.learners.session import write_json
+from evo.record import RecordConfig
+from evo.record.run import Birth, RunRecorder
+from evo.robot.builder import PhysicsParams, build
 from evo.robot.io import load_robot, save_robot
 from evo.robot.operators import OperatorError
 
@@ -313,3 +316,35 @@ class Evolution:
             "steps_per_second": steps / max(self.wall_seconds, 1e-9),
             "complete": len(self.history) >= self.ga.robot_budget,
         }
+
+
+class RunLog:
+    """Mirrors the run into ``run.mcap`` and ``run.rrd`` (``evo.record.RunRecorder``):
+    every history row as a birth, and at the end the best robots' geometry."""
+
+    EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error")
+
+    def __init__(self, run_dir: Path, record: RecordConfig, metadata: dict[str, Any]) -> None:
+        self.run_dir = run_dir
+        self.recorder = (RunRecorder(run_dir, metadata, mcap=record.mcap, rerun=record.rerun)
+                         if record.enabled else None)
+
+    def __call__(self, row: dict[str, Any]) -> None:
+        if self.recorder is not None:
+            self.recorder.birth(Birth(
+                int(row["birth"]), str(row["name"]), float(row["fitness"]), bool(row["accepted"]),
+                float(row["population_best"]), float(row["population_mean"]),
+                extra={k: row[k] for k in self.EXTRA},
+            ))
+
+    def close(self, history: list[dict[str, Any]], physics: PhysicsParams, top: int = 5,
+              summary: dict[str, Any] | None = None) -> None:
+        """Add the ``top`` fittest robots' geometry, then close the files."""
+        if self.recorder is None:
+            return
+        done = [r for r in history if not r["error"] and math.isfinite(r["fitness"])]
+        for row in sorted(done, key=lambda r: r["fitness"], reverse=True)[:top]:
+            robot = load_robot(self.run_dir / "robots" / f"{row['name']}.json")
+            self.recorder.robot(row["name"], build(robot, physics).compile(),
+                                fitness=float(row["fitness"]))
+        self.recorder.close(summary)

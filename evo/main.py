@@ -19,6 +19,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import hydra
 import numpy as np
@@ -37,8 +38,9 @@ from evo.components.ga import (
 from evo.config import ConfigError, instantiate, typed
 from evo.envs.task import EnvConfig
 from evo.evaluation import Job
-from evo.evolution import Evolution, GAConfig
+from evo.evolution import Evolution, GAConfig, RunLog
 from evo.learners.common import LearnerConfig
+from evo.record import RecordConfig
 from evo.robot import (
     GeneratorParams,
     InvalidRobotError,
@@ -200,7 +202,9 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     strategy = _strategy(cfg)
     ga = typed(GAConfig, {k: cfg.ga[k] for k in ("population_size", "robot_budget")}, "ga")
     method = method_label(strategy.code, learner.update)
-    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method)
+    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method,
+              record=typed(RecordConfig, cfg.record, "record"),
+              config_yaml=OmegaConf.to_yaml(cfg, resolve=True))
     replacement = instantiate(cfg.ga.replacement, "ga.replacement")
     if not isinstance(replacement, ReplaceWorst):
         raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")
@@ -218,7 +222,14 @@ def run_evolve(cfg: DictConfig, out: Path) -> None:
     if cfg.resume is not None:
         cfg = _resumed_config(Path(str(cfg.resume)))
     parts = evolve_parts(cfg, out)
+    log = RunLog(out, parts.job.record, {"config": parts.job.config_yaml, "seed": int(cfg.seed),
+                                         "method": parts.job.method, "name": out.name})
     with evolution_progress(parts.ga.robot_budget, parts.job.method) as show:
+
+        def on_result(row: dict[str, Any]) -> None:
+            show(row)
+            log(row)
+
         evolution = Evolution(
             out,
             ga=parts.ga,
@@ -228,7 +239,7 @@ def run_evolve(cfg: DictConfig, out: Path) -> None:
             job=parts.job,
             executor=parts.executor,
             seed=int(cfg.seed),
-            on_result=show,
+            on_result=on_result,
         )
         if (out / "state.json").exists():
             try:
@@ -236,7 +247,12 @@ def run_evolve(cfg: DictConfig, out: Path) -> None:
             except ValueError as err:
                 raise ConfigError(f"resume: {err}") from None
             show.resumed(evolution.history)
-        summary = evolution.run()
+            for row in evolution.history:
+                log(row)
+        try:
+            summary = evolution.run()
+        finally:
+            log.close(evolution.history, parts.job.physics, summary=evolution.summary())
     print_summary(summary, out)
 
 

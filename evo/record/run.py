@@ -160,12 +160,16 @@ class RunRecorder:
             _style_series(self.rec)
 
     def birth(self, birth: Birth) -> None:
-        """Record one evaluated robot (flushed at once: births are rare)."""
-        self._last_birth = birth.index
+        """Record one evaluated robot (flushed at once: births are rare).
+
+        MCAP log time counts results in the order they arrived (one second each), so it
+        stays monotonic when parallel evaluations finish out of birth order.
+        """
+        self._last_birth += 1
         if self.mcap is not None:
             self._births.log(
                 json.dumps(birth.row(), allow_nan=False).encode(),
-                log_time=birth.index * 1_000_000_000,
+                log_time=self._last_birth * 1_000_000_000,
             )
             self.mcap.flush()
         if self.rec is not None:
