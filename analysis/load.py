@@ -1,0 +1,432 @@
+"""Run directories into the tidy robots and curves tables of :mod:`analysis.tables`.
+
+:func:`load_runs` takes one or many paths. Each is a run directory (it holds
+``history.csv``) or a folder holding run directories at any depth, such as a Hydra
+multirun folder (``0/``, ``1/``, ... or ``E+L_seed0/``, ...). From each run directory:
+
+* ``config.yaml``: the GA ``seed`` (the unit of replication) and the initial
+  ``ga.population_size`` (to replay the population, :mod:`analysis.population`);
+* ``history.csv``: one robots row per history row; ``method`` from its ``method``
+  column (from ``summary.json`` or the config when the history is empty);
+* ``evals/<name>.mcap``: each robot's learning curve via :func:`evo.record.read_curve`.
+  The MCAP file is the source of truth. Only when it is missing is ``evals/<name>.csv``
+  read instead; a warning names the files and the robots table's ``curve_source`` says
+  ``"csv"`` (``"mcap"`` normally, ``""`` when neither file exists, as for a failed
+  evaluation).
+
+**Run id.** A run directory's name (``E+L_seed0``, ``3``, ``2024-05-01/12-00-00``'s
+last part); where two inputs share a name, their paths relative to the inputs' common
+folder.
+
+**Budget (decision).** The robots table's ``budget`` is the env steps a robot was
+actually trained for (history ``env_steps``: the scheduled budget rounded up to whole
+collector batches), because that is what its learning curve spans and what its training
+cost; the scheduled budget is kept as ``scheduled_budget``. A failed evaluation (no
+env steps) keeps its scheduled budget.
+
+Besides the schema columns, the robots table carries ``scheduled_budget``,
+``operator``, ``replaced``, ``episodes``, ``wall_seconds``, ``error``, ``eval_seed``
+(history's per-evaluation ``seed``) and ``curve_source``; the curves table carries
+every column the recording holds (``episode_length``, ``reward/...``, ``loss/...``,
+``wall_seconds``, ...).
+
+:func:`load_retrained` reads retrained structures for the noise ceiling
+(:func:`analysis.early_slope.noise_ceiling`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import warnings
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from omegaconf import OmegaConf
+
+from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
+from evo.record import read_curve
+
+HISTORY = "history.csv"
+EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
+    "scheduled_budget", "operator", "replaced", "episodes", "wall_seconds", "error",
+    "eval_seed", "curve_source",
+)
+RUN_COLUMNS: tuple[str, ...] = (
+    "run", "method", "seed", "population_size", "robots", "complete", "curves_mcap",
+    "curves_csv", "curves_missing", "path",
+)
+STRUCTURE = re.compile(r"^(robot-[0-9a-f]{8})")
+"""A robot name's structure part: re-evaluations of one structure add ``-<birth>``."""
+
+PathsLike = str | os.PathLike[str] | Iterable[str | os.PathLike[str]]
+
+
+class RunDirectoryError(ValueError):
+    """A run directory (or one of its files) is missing or not what evo writes."""
+
+
+@dataclass(frozen=True)
+class Runs:
+    """What :func:`load_runs` read.
+
+    Attributes:
+        robots: Robots table (:mod:`analysis.tables`), in run and birth order.
+        curves: Curves table, in run, robot birth and env-step order.
+        runs: One row per run directory: ``run``, ``method``, ``seed``,
+            ``population_size``, ``robots``, ``complete`` (``summary.json`` says the
+            run finished), ``curves_mcap``, ``curves_csv``, ``curves_missing`` (robots
+            whose curve came from each source) and ``path``.
+        notes: Sentences about the input a reader should know (CSV fallbacks, ...).
+    """
+
+    robots: pd.DataFrame
+    curves: pd.DataFrame
+    runs: pd.DataFrame
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def population_size(self) -> int:
+        """The initial population size shared by the runs (the largest, if they differ)."""
+        sizes = self.runs["population_size"].dropna()
+        return int(sizes.max()) if len(sizes) else 20
+
+
+# ---------------------------------------------------------------- finding runs
+
+
+def find_run_dirs(paths: PathsLike) -> list[Path]:
+    """Every run directory in ``paths``, each once, in the order given (then sorted).
+
+    Args:
+        paths: Run directories or folders holding them (at any depth).
+
+    Returns:
+        Resolved run directory paths.
+
+    Raises:
+        FileNotFoundError: If a path does not exist.
+        RunDirectoryError: If a path is neither a run directory nor holds one.
+    """
+    found: dict[Path, None] = {}
+    for path in _as_paths(paths):
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such run directory")
+        if not path.is_dir():
+            raise RunDirectoryError(f"{path}: not a directory; give a run directory")
+        if (path / HISTORY).is_file():
+            found[path.resolve()] = None
+            continue
+        inside = sorted(h.parent for h in path.rglob(HISTORY) if h.is_file())
+        if not inside:
+            raise RunDirectoryError(
+                f"{path}: not a run directory (no {HISTORY}) and holds none"
+            )
+        found.update((p.resolve(), None) for p in inside)
+    return list(found)
+
+
+def _as_paths(paths: PathsLike) -> list[Path]:
+    if isinstance(paths, str | os.PathLike):
+        return [Path(paths)]
+    return [Path(p) for p in paths]
+
+
+def run_ids(dirs: list[Path]) -> list[str]:
+    """Short unique ids: directory names, or paths relative to the common folder."""
+    names = [d.name for d in dirs]
+    if len(set(names)) == len(names):
+        return names
+    common = Path(os.path.commonpath(dirs))
+    return [d.relative_to(common).as_posix() or d.name for d in dirs]
+
+
+# ---------------------------------------------------------------- one run
+
+
+def read_config(run_dir: Path) -> dict[str, Any]:
+    """The resolved ``config.yaml`` of a run as plain containers.
+
+    Raises:
+        RunDirectoryError: If the file is missing or not a YAML mapping.
+    """
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        raise RunDirectoryError(f"{path}: missing; every run directory holds its config")
+    try:
+        config = OmegaConf.to_container(OmegaConf.load(path), resolve=False)
+    except Exception as err:  # noqa: BLE001 - any parse error is the file's fault
+        raise RunDirectoryError(f"{path}: not a readable YAML config ({err})") from None
+    if not isinstance(config, dict):
+        raise RunDirectoryError(f"{path}: expected a YAML mapping")
+    return {str(k): v for k, v in config.items()}
+
+
+def read_history(run_dir: Path) -> pd.DataFrame:
+    """``history.csv`` with the columns the robots table needs checked.
+
+    Raises:
+        RunDirectoryError: If it cannot be parsed or lacks a needed column.
+    """
+    path = run_dir / HISTORY
+    try:
+        history = pd.read_csv(path, dtype={"name": str, "parents": str, "error": str,
+                                           "replaced": str, "operator": str})
+    except (OSError, ValueError, pd.errors.ParserError) as err:
+        raise RunDirectoryError(f"{path}: not a readable history ({err})") from None
+    needed = ("birth", "name", "budget", "fitness", "accepted")
+    missing = [c for c in needed if c not in history.columns]
+    if missing:
+        raise RunDirectoryError(
+            f"{path}: lacks column(s) {missing}; it has {list(history.columns)}"
+        )
+    return history
+
+
+def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> str:
+    """The run's method: history's ``method`` column, else summary.json, else the config.
+
+    Raises:
+        RunDirectoryError: If the history names more than one method.
+    """
+    if "method" in history.columns and history["method"].notna().any():
+        methods = history["method"].dropna().unique()
+        if len(methods) > 1:
+            raise RunDirectoryError(
+                f"{run_dir / HISTORY}: one run holds one method, found {sorted(methods)}"
+            )
+        return str(methods[0])
+    summary = _summary(run_dir)
+    if "method" in summary:
+        return str(summary["method"])
+    ga, learner = config.get("ga", {}), config.get("learner", {})
+    return f"{ga.get('structure', 'E')}+{'L' if learner.get('update', True) else 'R'}"
+
+
+def _summary(run_dir: Path) -> dict[str, Any]:
+    path = run_dir / "summary.json"
+    if not path.is_file():
+        return {}
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise RunDirectoryError(f"{path}: not readable JSON ({err})") from None
+    return summary if isinstance(summary, dict) else {}
+
+
+def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd.DataFrame:
+    """The robots table rows of one run, from its history (one row per history row)."""
+
+    def text(column: str) -> pd.Series:
+        values = history[column] if column in history.columns else pd.Series("", history.index)
+        return values.fillna("").astype(str)
+
+    def number(column: str) -> pd.Series:
+        values = history[column] if column in history.columns else pd.Series(np.nan, history.index)
+        return pd.to_numeric(values, errors="coerce")
+
+    scheduled, steps = number("budget"), number("env_steps")
+    table = pd.DataFrame({
+        "run": run,
+        "method": method,
+        "seed": seed,
+        "birth": history["birth"].astype(int),
+        "name": history["name"].astype(str),
+        "budget": steps.where(steps > 0, scheduled).fillna(0).astype(int),
+        "fitness": number("fitness").astype(float),
+        "accepted": text("accepted").str.lower().eq("true"),
+        "parents": text("parents").str.replace(";", ",", regex=False),
+        "scheduled_budget": scheduled.fillna(0).astype(int),
+        "operator": text("operator"),
+        "replaced": text("replaced"),
+        "episodes": number("episodes"),
+        "wall_seconds": number("wall_seconds"),
+        "error": text("error"),
+        "eval_seed": number("seed"),
+    })
+    return table.sort_values("birth").reset_index(drop=True)
+
+
+def read_robot_curve(run_dir: Path, name: str) -> tuple[pd.DataFrame | None, str]:
+    """One robot's learning curve: from its MCAP file, or its CSV when the MCAP is missing.
+
+    Args:
+        run_dir: The run directory.
+        name: The robot's name.
+
+    Returns:
+        The curve as :func:`evo.record.read_curve` gives it (None when neither file
+        exists) and its source, ``"mcap"``, ``"csv"`` or ``""``.
+
+    Raises:
+        RunDirectoryError: If the file that exists cannot be read.
+    """
+    mcap, csv = run_dir / "evals" / f"{name}.mcap", run_dir / "evals" / f"{name}.csv"
+    try:
+        if mcap.is_file():
+            return read_curve(mcap), "mcap"
+        if csv.is_file():
+            return pd.read_csv(csv), "csv"
+    except Exception as err:  # noqa: BLE001 - reader errors name no run; add it
+        bad = mcap if mcap.is_file() else csv
+        raise RunDirectoryError(f"{bad}: cannot read the learning curve ({err})") from None
+    return None, ""
+
+
+def curves_of_run(run: str, run_dir: Path, names: Iterable[str]) -> tuple[pd.DataFrame, list[str]]:
+    """The curves table rows of one run and each robot's curve source."""
+    parts, sources = [], []
+    for name in names:
+        curve, source = read_robot_curve(run_dir, name)
+        sources.append(source)
+        if curve is None or curve.empty:
+            continue
+        curve = curve.copy()
+        for column in CURVE_COLUMNS[2:]:
+            if column not in curve.columns:
+                curve[column] = np.nan
+        curve.insert(0, "name", name)
+        curve.insert(0, "run", run)
+        parts.append(curve)
+    if not parts:
+        return pd.DataFrame(columns=list(CURVE_COLUMNS)), sources
+    return pd.concat(parts, ignore_index=True), sources
+
+
+# ---------------------------------------------------------------- many runs
+
+
+def load_runs(paths: PathsLike) -> Runs:
+    """Read run directories into the robots and curves tables.
+
+    Args:
+        paths: Run directories, or folders holding them (a Hydra multirun folder).
+
+    Returns:
+        The tables, one row per run, and notes on the input.
+
+    Raises:
+        FileNotFoundError: If a path does not exist.
+        RunDirectoryError: Naming the directory or file that is not as evo writes it.
+    """
+    dirs = find_run_dirs(paths)
+    robots, curves, runs, notes = [], [], [], []
+    for run, run_dir in zip(run_ids(dirs), dirs, strict=True):
+        config = read_config(run_dir)
+        history = read_history(run_dir)
+        method = run_method(run_dir, history, config)
+        seed = _int_setting(config, "seed", run_dir)
+        table = robots_of_run(run, method, seed, history)
+        run_curves, sources = curves_of_run(run, run_dir, table["name"])
+        table["curve_source"] = sources
+        csv_names = table.loc[table["curve_source"] == "csv", "name"].tolist()
+        if csv_names:
+            note = (f"run {run}: {len(csv_names)} curve(s) read from evals/<name>.csv because "
+                    f"the MCAP file is missing ({', '.join(csv_names)}) in {run_dir}")
+            warnings.warn(note, stacklevel=2)
+            notes.append(note)
+        robots.append(table)
+        curves.append(run_curves)
+        runs.append(dict(
+            run=run, method=method, seed=seed,
+            population_size=config.get("ga", {}).get("population_size"),
+            robots=len(table), complete=bool(_summary(run_dir).get("complete", False)),
+            curves_mcap=int((table["curve_source"] == "mcap").sum()),
+            curves_csv=len(csv_names),
+            curves_missing=int((table["curve_source"] == "").sum()),
+            path=str(run_dir),
+        ))
+    robots_table = pd.concat(robots, ignore_index=True)
+    robots_table = robots_table[[*ROBOT_COLUMNS, *EXTRA_ROBOT_COLUMNS]]
+    curves_table = _tidy_curves(pd.concat(curves, ignore_index=True), robots_table)
+    return Runs(robots_table, curves_table, pd.DataFrame(runs, columns=list(RUN_COLUMNS)), notes)
+
+
+def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:
+    try:
+        return int(config[key])
+    except (KeyError, TypeError, ValueError):
+        raise RunDirectoryError(
+            f"{run_dir / 'config.yaml'}: needs an integer '{key}', got {config.get(key)!r}"
+        ) from None
+
+
+def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
+    """Schema columns first, integer step and episode counts, run and birth order."""
+    for column in ("env_steps", "episodes"):
+        values = pd.to_numeric(curves[column], errors="coerce")
+        curves[column] = values.astype(np.int64) if values.notna().all() else values
+    order = robots[["run", "name", "birth"]]
+    curves = curves.merge(order, on=["run", "name"], how="left", sort=False)
+    curves = curves.sort_values(["run", "birth", "env_steps"], kind="stable")
+    rest = [c for c in curves.columns if c not in CURVE_COLUMNS and c != "birth"]
+    return curves[[*CURVE_COLUMNS, *rest]].reset_index(drop=True)
+
+
+# ---------------------------------------------------------------- retrained structures
+
+
+def load_retrained(paths: PathsLike) -> pd.DataFrame:
+    """Fitness of structures trained again, for :func:`analysis.early_slope.noise_ceiling`.
+
+    Each path is, or holds at any depth, either a training run (``+exp=train``: its
+    ``summary.json`` names the ``robot``, the ``seed`` and the ``fitness``) or an
+    evolution run whose robots were retrained (every history row counts, its ``seed``
+    being the training seed). A structure is the robot name without a ``-<birth>``
+    suffix.
+
+    Args:
+        paths: Directories as above.
+
+    Returns:
+        ``structure``, ``train_seed``, ``fitness``, ``budget`` and ``source`` (the
+        directory), one row per training.
+
+    Raises:
+        FileNotFoundError: If a path does not exist.
+        RunDirectoryError: If a path holds no training or evolution run.
+    """
+    rows: list[dict[str, Any]] = []
+    for path in _as_paths(paths):
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such directory of retrained robots")
+        found = False
+        summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
+                     if p.is_file() and p.parent.name != "evals"}
+        for summary_path in sorted(summaries):
+            run_dir = summary_path.parent
+            if (run_dir / HISTORY).is_file():
+                history = read_history(run_dir)
+                for row in history.itertuples(index=False):
+                    rows.append(dict(structure=_structure(str(row.name)),
+                                     train_seed=getattr(row, "seed", np.nan),
+                                     fitness=float(row.fitness),
+                                     budget=getattr(row, "env_steps", row.budget),
+                                     source=str(run_dir)))
+                found = True
+            else:
+                summary = _summary(run_dir)
+                if {"robot", "seed", "fitness"} <= summary.keys():
+                    rows.append(dict(structure=_structure(str(summary["robot"])),
+                                     train_seed=summary["seed"],
+                                     fitness=float(summary["fitness"]),
+                                     budget=summary.get("env_steps", np.nan),
+                                     source=str(run_dir)))
+                    found = True
+        if not found:
+            raise RunDirectoryError(
+                f"{path}: holds no training run (summary.json with robot, seed, fitness) "
+                f"and no evolution run ({HISTORY})"
+            )
+    table = pd.DataFrame(rows).drop_duplicates()
+    return table.reset_index(drop=True)
+
+
+def _structure(name: str) -> str:
+    match = STRUCTURE.match(name)
+    return match.group(1) if match else name
