@@ -1,0 +1,411 @@
+"""The ablation report (paper §8): ``python -m analysis.report RUN... --out DIR``.
+
+Reads run directories (or a Hydra multirun folder, :mod:`analysis.load`) and writes
+``DIR/report.md`` with its PNG figures beside it:
+
+* per method: n, max, top-5 mean, mean, median, IQM and std of fitness, each with a
+  bootstrap CI (:func:`analysis.stats.summarize`);
+* the Kruskal–Wallis test, pairwise Mann–Whitney U tests with Holm's adjustment and
+  Vargha–Delaney A12 (:mod:`analysis.stats`); with three or more GA seeds per method the
+  same tests on per-run means;
+* the interaction contrast ``(E+L − R+L) − (E+R − R+R)`` and its two parts, with CIs;
+* the paper's figures (:mod:`analysis.plots`): fitness per robot in birth order, each
+  method against R+R (Figs. 13–15); every run's fitness over the evolution (Figs. 10,
+  12); learning curves of selected robots (Figs. 9, 11); best fitness so far against
+  cumulative env steps;
+* the paper's numbers beside ours (the reward scales differ; see the report's note).
+
+Methods missing from the input are listed as missing; whatever needs them (a test, a
+contrast, a panel) is left out with a sentence saying so. Robots whose evaluation
+failed (no fitness) are left out of the statistics and counted.
+
+The notebooks call the same functions (:func:`ablation_tables`,
+:func:`ablation_figures`, :func:`ablation_markdown`), so the report and a notebook on the
+same runs show the same numbers for the same ``--seed``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from analysis import plots, stats
+from analysis.load import Runs, load_runs
+from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
+from analysis.tables import METHODS, method_order
+
+REPORT = "report.md"
+LEARNING_CURVES = 8
+"""Robots per learning-curve figure (the paper's Fig. 9 shows ten)."""
+SEEDS_FOR_RUN_TESTS = 3
+"""GA seeds each method needs before the report also tests per-run means."""
+
+
+# ---------------------------------------------------------------- tables
+
+
+@dataclass
+class AblationTables:
+    """Every table of the ablation report.
+
+    Attributes:
+        present: Methods with at least one robot with a fitness, in report order.
+        missing: Of the four ablation methods, those with none.
+        left_out: Robots without a fitness (failed evaluations), left out.
+        summary: :func:`analysis.stats.summarize` (long).
+        main: One row per ablation method (missing ones marked), statistics as
+            ``estimate [ci_low, ci_high]``.
+        kruskal: The Kruskal–Wallis test over robots, or None.
+        pairwise: :func:`analysis.stats.pairwise_mann_whitney` over robots.
+        per_run: The same two tests on per-run means (``kruskal``, ``pairwise``), or
+            None with too few seeds.
+        interaction: :func:`analysis.stats.interaction_contrast`, or None.
+        paper: :func:`analysis.stats.compare_with_paper`.
+        budgets: Per method: median, min and max env steps per robot.
+        notes: Sentences on what was left out and why.
+    """
+
+    present: list[str]
+    missing: list[str]
+    left_out: int
+    summary: pd.DataFrame
+    main: pd.DataFrame
+    kruskal: stats.GroupTest | None
+    pairwise: pd.DataFrame
+    per_run: tuple[stats.GroupTest | None, pd.DataFrame] | None
+    interaction: pd.DataFrame | None
+    paper: pd.DataFrame
+    budgets: pd.DataFrame
+    notes: list[str] = field(default_factory=list)
+
+
+def ablation_tables(
+    robots: pd.DataFrame,
+    rng: np.random.Generator,
+    *,
+    k: int = 5,
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+) -> AblationTables:
+    """Summaries, tests, contrasts and the paper's numbers for a robots table.
+
+    Args:
+        robots: Robots table (any subset of the four methods).
+        rng: Bootstrap randomness.
+        k: ``k`` of the top-k mean.
+        confidence: Two-sided CI level.
+        n_resamples: Bootstrap resamples per interval.
+
+    Returns:
+        The tables; what cannot be computed is None and explained in ``notes``.
+    """
+    scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    present = method_order(scored["method"])
+    missing = [m for m in METHODS if m not in present]
+    notes = []
+    if missing:
+        notes.append(f"Methods missing from the input: {', '.join(missing)}; the tests "
+                     "and contrasts that need them are left out.")
+    left_out = len(robots) - len(scored)
+    if left_out:
+        notes.append(f"{left_out} robot(s) without a fitness (failed evaluation) left out.")
+    summary = stats.summarize(scored, rng, k=k, confidence=confidence,
+                              n_resamples=n_resamples)
+    kruskal, pairwise = _tests(scored, None, notes)
+    per_run = None
+    runs_per_method = scored.groupby("method")["run"].nunique()
+    if len(present) >= 2 and runs_per_method.min() >= SEEDS_FOR_RUN_TESTS:
+        per_run = _tests(scored, "mean", notes)
+    else:
+        notes.append(f"Tests on per-run means need {SEEDS_FOR_RUN_TESTS} or more GA seeds "
+                     "per method; the tests below compare robots.")
+    interaction = None
+    if not missing:
+        interaction = stats.interaction_contrast(scored, rng, confidence=confidence,
+                                                 n_resamples=n_resamples)
+    else:
+        notes.append("The interaction contrast needs all four methods; not computed.")
+    return AblationTables(
+        present=present, missing=missing, left_out=left_out, summary=summary,
+        main=main_table(summary, missing), kruskal=kruskal, pairwise=pairwise,
+        per_run=per_run, interaction=interaction,
+        paper=stats.compare_with_paper(summary), budgets=budget_table(scored), notes=notes,
+    )
+
+
+def _tests(
+    robots: pd.DataFrame, per_run: str | None, notes: list[str]
+) -> tuple[stats.GroupTest | None, pd.DataFrame]:
+    """Kruskal–Wallis and pairwise tests, or None and an empty table with a note."""
+    unit = "per-run means" if per_run else "robots"
+    if robots["method"].nunique() < 2:
+        notes.append(f"Tests on {unit} need two methods or more; not computed.")
+        return None, pd.DataFrame()
+    try:
+        kruskal = stats.kruskal_wallis(robots, per_run=per_run)
+    except ValueError as err:  # scipy: all values identical
+        notes.append(f"Kruskal–Wallis on {unit} not computed: {err}.")
+        kruskal = None
+    return kruskal, stats.pairwise_mann_whitney(robots, per_run=per_run)
+
+
+def main_table(summary: pd.DataFrame, missing: Sequence[str] = ()) -> pd.DataFrame:
+    """One row per method: n, seeds, resampling unit and every statistic with its CI.
+
+    Args:
+        summary: :func:`analysis.stats.summarize`.
+        missing: Methods to list as missing (no robots).
+
+    Returns:
+        Columns ``method``, ``n``, ``seeds``, ``unit``, then one per statistic.
+    """
+    rows = []
+    for method, group in summary.groupby("method", sort=False):
+        row: dict[str, object] = dict(method=method, n=int(group["n"].iloc[0]),
+                                      seeds=int(group["n_seeds"].iloc[0]),
+                                      unit=group["unit"].iloc[0])
+        for stat in group.itertuples(index=False):
+            row[str(stat.statistic)] = fmt_ci(stat.estimate, stat.ci_low, stat.ci_high)
+        rows.append(row)
+    columns = ["method", "n", "seeds", "unit", *pd.unique(summary["statistic"])]
+    rows += [dict(method=m, n=0, seeds=0, unit="missing") for m in missing]
+    table = pd.DataFrame(rows, columns=columns)
+    order = {m: i for i, m in enumerate(method_order(table["method"]))}
+    return table.sort_values("method", key=lambda s: s.map(order)).reset_index(drop=True)
+
+
+def budget_table(robots: pd.DataFrame) -> pd.DataFrame:
+    """Per method: robots, runs and the median, min and max env steps per robot."""
+    table = robots.groupby("method")["budget"].agg(["median", "min", "max"])
+    table.insert(0, "runs", robots.groupby("method")["run"].nunique())
+    table.insert(0, "robots", robots.groupby("method").size())
+    return table.loc[method_order(table.index)].reset_index()
+
+
+# ---------------------------------------------------------------- figures
+
+
+def select_robots(robots: pd.DataFrame, run: str, n: int = LEARNING_CURVES) -> list[str]:
+    """Up to ``n`` robots of a run spread over its fitness ranks, best first.
+
+    Ranks are spaced evenly from the best to the worst robot with a fitness, so the
+    figure shows the spread of learning abilities as the paper's Figs. 9 and 11 do.
+    """
+    rows = robots[(robots["run"] == run) & np.isfinite(robots["fitness"])]
+    rows = rows.sort_values("fitness", ascending=False)
+    picks = np.unique(np.linspace(0, len(rows) - 1, min(n, len(rows))).round().astype(int))
+    return rows["name"].iloc[picks].tolist()
+
+
+def ablation_figures(
+    robots: pd.DataFrame,
+    curves: pd.DataFrame,
+    out: str | Path | None = None,
+    *,
+    population_size: int = 20,
+) -> dict[str, Figure]:
+    """The paper's figures for these runs, written as ``out/<key>.png`` when ``out`` is given.
+
+    Args:
+        robots: Robots table.
+        curves: Curves table.
+        out: Folder for the PNGs, or None to only build the figures.
+        population_size: Initial population size (for the population replay).
+
+    Returns:
+        File stem → figure: ``fitness_vs_RR`` (Figs. 13–15, when a method besides R+R
+        is present), ``evolution_<run>`` per run (Figs. 10, 12), ``curves_<run>`` per run
+        with learning curves (Figs. 9, 11) and ``best_so_far``.
+    """
+    folder = None if out is None else Path(out)
+
+    def path(stem: str) -> Path | None:
+        return None if folder is None else folder / f"{stem}.png"
+
+    figures: dict[str, Figure] = {}
+    scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    others = [m for m in method_order(scored["method"]) if m != "R+R"]
+    if others:
+        figures["fitness_vs_RR"] = plots.plot_against_baseline(
+            scored, others, path=path("fitness_vs_RR"))
+    for run in sorted(scored["run"].unique()):
+        stem = f"evolution_{safe_name(run)}"
+        figures[stem] = plots.plot_evolution(scored, run, population_size=population_size,
+                                             path=path(stem))
+        names = [n for n in select_robots(scored, run)
+                 if ((curves["run"] == run) & (curves["name"] == n)).any()]
+        if names:
+            stem = f"curves_{safe_name(run)}"
+            fitness = scored[scored["run"] == run].set_index("name")["fitness"]
+            labels = [f"{n} ({fitness[n]:+.3f})" for n in names]
+            fig = plots.plot_learning_curves(curves, names, run, labels=labels)
+            fig.axes[0].set_title(f"{run}: learning curves (fitness in brackets)")
+            figures[stem] = plots.finish(fig, path(stem))
+    if len(scored):
+        figures["best_so_far"] = plots.plot_best_so_far(scored, path=path("best_so_far"))
+    return figures
+
+
+# ---------------------------------------------------------------- Markdown
+
+
+PAPER_NOTE = (
+    "The paper's numbers come from its Unity/ML-Agents task (12 arenas, 30,000 env steps "
+    "per robot); ours from the MuJoCo re-implementation with the budgets above. Episode "
+    "length, physics, reward shaping and success rate differ, so reward scales differ: "
+    "compare the ordering of the methods and the sign of the contrasts, not the values."
+)
+
+
+def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Path],
+                      out: Path) -> str:
+    """The report's Markdown text.
+
+    Args:
+        runs: What :func:`analysis.load.load_runs` read.
+        tables: :func:`ablation_tables` of ``runs.robots``.
+        figures: File stem → written PNG path.
+        out: Folder of the report (links are relative to it).
+
+    Returns:
+        The Markdown text.
+    """
+    t = tables
+    parts = ["# Ablation: R+R, R+L, E+R, E+L\n\n",
+             f"Methods present: {', '.join(t.present) or 'none'}. "
+             f"Missing: {', '.join(t.missing) or 'none'}.\n\n"]
+    parts += [f"- {note}\n" for note in [*runs.notes, *t.notes]]
+    parts += ["\n## Runs\n\n", markdown_table(runs.runs.drop(columns="path")),
+              "\n### Env steps per robot\n\n", markdown_table(t.budgets, digits=0)]
+    parts += ["\n## Fitness per method\n\n",
+              "Estimates with bootstrap 95 % CIs; `unit` is the resampling unit (the robot, "
+              "or the whole GA run for an evolved method with several seeds).\n\n",
+              markdown_table(t.main)]
+    parts += ["\n## Tests\n", _tests_markdown("robots", t.kruskal, t.pairwise)]
+    if t.per_run is not None:
+        parts.append(_tests_markdown("per-run means", *t.per_run))
+    parts.append("\n## Interaction: does evolution pay off only with learning?\n\n")
+    if t.interaction is None:
+        parts.append(f"Not computed: needs all four methods (missing: {', '.join(t.missing)}).\n")
+    else:
+        shown = t.interaction.assign(
+            **{"estimate [CI]": [fmt_ci(r.estimate, r.ci_low, r.ci_high)
+                                 for r in t.interaction.itertuples()]})
+        parts.append(markdown_table(shown[["contrast", "estimate [CI]"]]))
+    parts += ["\n## Beside the paper\n\n", PAPER_NOTE + "\n\n", _order_markdown(t.summary),
+              "\n", markdown_table(t.paper)]
+    parts.append("\n## Figures\n")
+    for stem, path in figures.items():
+        parts.append(f"\n### {_caption(stem)}\n\n" + figure_link(path, out, stem))
+    return "".join(parts)
+
+
+def method_ranking(summary: pd.DataFrame, statistic: str) -> str:
+    """Methods by decreasing ``statistic`` estimate, as ``"E+L > R+L > ..."``."""
+    rows = summary[summary["statistic"] == statistic].dropna(subset=["estimate"])
+    return " > ".join(rows.sort_values("estimate", ascending=False)["method"])
+
+
+def _order_markdown(summary: pd.DataFrame) -> str:
+    lines = []
+    for statistic in ("max", "mean"):
+        paper = stats.PAPER_ABLATION[stats.PAPER_ABLATION["statistic"] == statistic]
+        paper_order = " > ".join(paper.sort_values("paper", ascending=False)["method"])
+        lines.append(f"- Order by {statistic}: paper {paper_order}; "
+                     f"ours {method_ranking(summary, statistic) or '–'}.\n")
+    return "".join(lines)
+
+
+def _tests_markdown(unit: str, kruskal: stats.GroupTest | None, pairwise: pd.DataFrame) -> str:
+    text = f"\n### On {unit}\n\n"
+    if kruskal is not None:
+        text += (f"Kruskal–Wallis over {', '.join(kruskal.methods)}: "
+                 f"H = {kruskal.statistic:.3f}, p = {kruskal.pvalue:.3g}.\n\n")
+    if not pairwise.empty:
+        text += ("Pairwise two-sided Mann–Whitney U, Holm-adjusted; A12 = P(a beats b).\n\n"
+                 + markdown_table(pairwise))
+    return text
+
+
+def _caption(stem: str) -> str:
+    if stem == "fitness_vs_RR":
+        return "Fitness per robot in birth order, each method against R+R (Figs. 13–15)"
+    if stem == "best_so_far":
+        return "Best fitness so far against cumulative env steps"
+    kind, _, run = stem.partition("_")
+    if kind == "evolution":
+        return f"Fitness over the evolution, run {run} (Figs. 10, 12)"
+    return f"Learning curves of selected robots, run {run} (Figs. 9, 11)"
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def write_report(
+    paths: Sequence[str | Path],
+    out: str | Path,
+    *,
+    seed: int = 0,
+    n_resamples: int = 2000,
+) -> Path:
+    """Load runs, compute the tables, draw the figures and write ``out/report.md``.
+
+    Args:
+        paths: Run directories or folders holding them.
+        out: Report folder (created).
+        seed: Seed of the bootstrap randomness.
+        n_resamples: Bootstrap resamples per interval.
+
+    Returns:
+        The path of the Markdown report.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = load_runs(paths)
+    tables = ablation_tables(runs.robots, np.random.default_rng(seed),
+                             n_resamples=n_resamples)
+    figures = ablation_figures(runs.robots, runs.curves, out,
+                               population_size=runs.population_size)
+    written = {stem: out / f"{stem}.png" for stem in figures}
+    report = out / REPORT
+    report.write_text(ablation_markdown(runs, tables, written, out), encoding="utf-8")
+    tables.summary.to_csv(out / "summary.csv", index=False)
+    tables.pairwise.to_csv(out / "pairwise.csv", index=False)
+    return report
+
+
+def parser(description: str) -> argparse.ArgumentParser:
+    """The arguments every report CLI takes: run directories, ``--out``, ``--seed``,
+    ``--resamples``."""
+    cli = argparse.ArgumentParser(description=description)
+    cli.add_argument("runs", nargs="+", type=Path,
+                     help="run directories, or folders holding them (a multirun folder)")
+    cli.add_argument("--out", type=Path, required=True, help="report folder (created)")
+    cli.add_argument("--seed", type=int, default=0, help="bootstrap seed")
+    cli.add_argument("--resamples", type=int, default=2000,
+                     help="bootstrap resamples per confidence interval")
+    return cli
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
+    args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
+    try:
+        report = write_report(args.runs, args.out, seed=args.seed,
+                              n_resamples=args.resamples)
+    except (FileNotFoundError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"report: {report}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
