@@ -93,12 +93,31 @@ def write_video(
     return path
 
 
+def recorded_seed(run_dir: Path, name: str | None) -> int:
+    """The seed of the deterministic episode recorded after training (0 if unknown)."""
+    mcap = run_dir / "evals" / f"{name}.mcap"
+    if name is None or not mcap.is_file():
+        return 0
+    from evo.record import read_metadata
+
+    return int(read_metadata(mcap).get("replay_seed", 0))
+
+
 def replay(
-    run_dir: Path, name: str | None, episodes: int, seed: int, video: Path | None, rrd: Path | None
+    run_dir: Path,
+    name: str | None,
+    episodes: int,
+    seed: int | None,
+    video: Path | None,
+    rrd: Path | None,
 ) -> list[Trajectory]:
-    """Re-simulate ``episodes`` deterministic episodes and write the requested files."""
+    """Re-simulate ``episodes`` deterministic episodes and write the requested files.
+
+    With ``seed=None`` the first episode is the one recorded after training.
+    """
     physics, env = _run_config(run_dir)
     robot, policy_path = _files(run_dir, name)
+    seed = recorded_seed(run_dir, name) if seed is None else seed
     policy = load_checkpoint(policy_path)
     core, played = play(robot, policy, physics=physics, env=env, seed=seed, episodes=episodes)
     for i, episode in enumerate(played):
@@ -137,7 +156,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("name", nargs="?", help="robot name (omit for a task=train run)")
     parser.add_argument("--episodes", type=int, default=1)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="episode seed (default: that of the recorded deterministic episode)",
+    )
     parser.add_argument("--video", type=Path)
     parser.add_argument("--rrd", type=Path)
     parser.add_argument("--gallery", action="store_true", help="picture the best robots")
