@@ -77,8 +77,29 @@ def print_summary(summary: dict[str, Any], run_dir: Path, console: Console | Non
         text = f"{value:,.4g}" if isinstance(value, float) else str(value)
         table.add_row(key.replace("_", " "), text)
     console.print(table)
+    for line in where_to_look(summary, run_dir):
+        console.print(line, soft_wrap=True, highlight=False)
+
+
+def where_to_look(summary: dict[str, Any], run_dir: Path) -> list[str]:
+    """Where the best robot's files are and the commands that open them."""
+    lines = [f"history: {run_dir / 'history.csv'}   summary: {run_dir / 'summary.json'}"]
     best = summary["best_robot"]
-    if best:
-        console.print(f"best robot: {run_dir / 'robots' / f'{best}.json'}")
-        console.print(f"its policy: {run_dir / 'evals' / f'{best}.pt'}")
-    console.print(f"history: {run_dir / 'history.csv'}   summary: {run_dir / 'summary.json'}")
+    if not best:
+        return lines
+    robot = run_dir / "robots" / f"{best}.json"
+    evals = run_dir / "evals"
+    lines += [f"best robot: {robot}", f"its policy: {evals / f'{best}.pt'}"]
+    recordings = [evals / f"{best}{ext}" for ext in (".rrd", ".mcap")]
+    lines += [f"recording: {path}" for path in recordings if path.is_file()]
+    lines += [
+        "open them:",
+        f"  python -m evo.robot info {robot}  # modules, sizes",
+        f"  python -m evo.replay {run_dir} {best} --video {run_dir / f'{best}.mp4'}",
+        f"  python evo/main.py +exp=evaluate robot={robot} checkpoint={evals / f'{best}.pt'}",
+    ]
+    if recordings[0].is_file():
+        lines.append(f"  rerun {recordings[0]}  # 3D episodes and learning curve")
+    if recordings[1].is_file():
+        lines.append(f"  Foxglove: open {recordings[1]}")
+    return lines
