@@ -38,6 +38,9 @@ many of the final top-k robots it would have thrown away. It is an offline, firs
 estimate: it keeps the rest of each run as it happened, whereas a GA that rejects early
 would have bred other offspring afterwards. :func:`noise_ceiling` bounds what any
 predictor can reach: the rank agreement of the same structures trained twice.
+
+``python -m analysis.early_slope RUN... --out DIR`` writes the study's report
+(:mod:`analysis.early_slope_report`).
 """
 
 from __future__ import annotations
@@ -298,10 +301,13 @@ def grouped_folds(groups: ArrayLike, n_splits: int = 5) -> list[NDArray[np.int64
         n_splits: Number of folds (fewer when there are fewer groups or rows).
 
     Returns:
-        One array of row indices per fold; together they cover every row once.
+        One array of row indices per fold; together they cover every row once (no
+        folds when there are no rows).
     """
     codes, labels = pd.factorize(np.asarray(groups))
     n = len(codes)
+    if n == 0:
+        return []
     if len(labels) < 2:
         return [block.astype(np.int64) for block in np.array_split(np.arange(n),
                                                                      min(n_splits, n))]
@@ -490,7 +496,9 @@ def rejection_tradeoff(
     Returns:
         Per ``target``, ``fraction``, ``predictor``: ``n``, ``rejected``,
         ``steps_saved`` (the rejected robots' budgets beyond the cut), ``steps_total``,
-        ``saved_share``, ``top_k_lost`` and ``best_lost``.
+        ``saved_share``, ``top_k_lost``, ``best_lost``, ``best_kept`` (the best
+        fitness among the robots kept) and ``fitness_lost`` (the best fitness minus
+        ``best_kept``: what the rule costs the search's result; 0 when the best is kept).
     """
     if threshold_column is not None:
         preds = preds[preds["predictor"] != "slope"]
@@ -499,12 +507,17 @@ def rejection_tradeoff(
             ["target", "fraction", "predictor"], sort=False):
         prediction = group["prediction"].to_numpy(dtype=float)
         if threshold_column is None:
-            threshold = np.full(len(group), np.nanquantile(prediction, quantile))
+            finite = prediction[np.isfinite(prediction)]
+            cut_value = np.quantile(finite, quantile) if len(finite) else np.nan
+            threshold = np.full(len(group), cut_value)
         else:
             threshold = group[threshold_column].to_numpy(dtype=float)
         rejected = prediction < threshold  # NaN on either side compares False
         budget = group["budget"].to_numpy(dtype=float)
+        fitness = group["fitness"].to_numpy(dtype=float)
         rank = group["fitness"].rank(ascending=False, method="first").to_numpy()
+        kept = fitness[~rejected & np.isfinite(fitness)]
+        best_kept = float(kept.max()) if len(kept) else np.nan
         rows.append(dict(
             target=target, fraction=fraction, predictor=predictor, n=len(group),
             rejected=int(rejected.sum()),
@@ -512,9 +525,10 @@ def rejection_tradeoff(
             steps_total=float(budget.sum()),
             top_k_lost=int((rejected & (rank <= top_k)).sum()),
             best_lost=bool((rejected & (rank == 1)).any()),
+            best_kept=best_kept, fitness_lost=float(np.nanmax(fitness)) - best_kept,
         ))
     columns = ["target", "fraction", "predictor", "n", "rejected", "steps_saved",
-               "steps_total", "top_k_lost", "best_lost"]
+               "steps_total", "top_k_lost", "best_lost", "best_kept", "fitness_lost"]
     table = pd.DataFrame(rows, columns=columns)
     table.insert(7, "saved_share", table["steps_saved"] / table["steps_total"])
     return table
@@ -571,3 +585,11 @@ def noise_ceiling(
                              n_resamples=n_resamples)
     return pd.Series(dict(rho=rho, ci_low=low, ci_high=high, n_structures=len(wide),
                           n_seeds=wide.shape[1]))
+
+
+if __name__ == "__main__":  # python -m analysis.early_slope RUN... --out DIR
+    import sys
+
+    from analysis.early_slope_report import main
+
+    sys.exit(main())

@@ -10,6 +10,8 @@ no global state, no display needed), returns it, and writes a PNG when given ``p
 * :func:`plot_learning_curves`: mean return during training of selected robots
   (Figs. 9, 11).
 * :func:`plot_best_so_far`: best fitness found against env steps spent, per run.
+* :func:`plot_rank_metrics`, :func:`plot_rejection_tradeoff`, :func:`plot_early_scatter`:
+  the early-slope study (:mod:`analysis.early_slope`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -184,3 +187,98 @@ def plot_best_so_far(robots: pd.DataFrame, *, path: str | Path | None = None) ->
     ax.legend(loc="lower right")
     return finish(fig, path)
 
+
+
+# ---------------------------------------------------------------- early-slope study
+
+
+def plot_rank_metrics(
+    metrics: pd.DataFrame,
+    target: str = "fitness",
+    *,
+    ceiling: float | None = None,
+    path: str | Path | None = None,
+) -> Figure:
+    """Spearman ρ, Kendall τ and top recall of every predictor against the cut.
+
+    Args:
+        metrics: :func:`analysis.early_slope.rank_metrics`.
+        target: Which target's rows to draw.
+        ceiling: The noise ceiling ρ, drawn as a dashed line on the Spearman panel.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes per metric, one line with CI error bars per predictor.
+    """
+    require_columns(metrics, ("target", "fraction", "predictor", "metric", "estimate",
+                              "ci_low", "ci_high"), "rank metrics table")
+    rows = metrics[metrics["target"] == target]
+    names = list(pd.unique(rows["metric"]))
+    fig, axes = new_figure(max(len(names), 1), width=4.4)
+    for ax, metric in zip(axes, names, strict=False):
+        for predictor, line in rows[rows["metric"] == metric].groupby("predictor", sort=False):
+            line = line.sort_values("fraction")
+            error = [line["estimate"] - line["ci_low"], line["ci_high"] - line["estimate"]]
+            ax.errorbar(line["fraction"], line["estimate"], yerr=error, marker="o",
+                        capsize=2, label=str(predictor))
+        if metric == "spearman" and ceiling is not None and np.isfinite(ceiling):
+            ax.axhline(ceiling, color="black", linestyle="--", label="noise ceiling")
+        ax.set(title=f"{metric} vs {target}", xlabel="cut (fraction of budget)")
+    axes[0].legend(fontsize="small")
+    return finish(fig, path)
+
+
+def plot_rejection_tradeoff(tradeoff: pd.DataFrame, *, title: str = "",
+                            path: str | Path | None = None) -> Figure:
+    """Compute saved against good robots lost by early rejection, per predictor.
+
+    Args:
+        tradeoff: :func:`analysis.early_slope.rejection_tradeoff` (one target).
+        title: Axes title (which rejection rule).
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes, one line per predictor through its cuts, each point
+        labelled with its cut.
+    """
+    require_columns(tradeoff, ("fraction", "predictor", "saved_share", "top_k_lost"),
+                    "rejection trade-off table")
+    fig, (ax,) = new_figure()
+    for predictor, line in tradeoff.groupby("predictor", sort=False):
+        line = line.sort_values("fraction")
+        ax.plot(line["saved_share"], line["top_k_lost"], marker="o", label=str(predictor))
+        for row in line.itertuples(index=False):
+            ax.annotate(f"{row.fraction:g}", (row.saved_share, row.top_k_lost), fontsize=7,
+                        textcoords="offset points", xytext=(3, 3))
+    ax.set(title=title, xlabel="share of env steps saved", ylabel="top-k robots rejected")
+    ax.legend(fontsize="small")
+    return finish(fig, path)
+
+
+def plot_early_scatter(preds: pd.DataFrame, fraction: float, *,
+                       path: str | Path | None = None) -> Figure:
+    """Each predictor's prediction against the actual target at one cut.
+
+    Args:
+        preds: :func:`analysis.early_slope.predictions` (one target).
+        fraction: The cut to draw.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes per predictor, one point per robot, coloured by method.
+    """
+    require_columns(preds, ("fraction", "predictor", "prediction", "actual", "method"),
+                    "predictions table")
+    rows = preds[np.isclose(preds["fraction"], fraction)]
+    names = list(pd.unique(rows["predictor"]))
+    fig, axes = new_figure(max(len(names), 1), width=3.6)
+    for ax, predictor in zip(axes, names, strict=False):
+        for method in method_order(rows["method"]):
+            points = rows[(rows["predictor"] == predictor) & (rows["method"] == method)]
+            ax.scatter(points["prediction"], points["actual"], s=12, label=method,
+                       color=METHOD_COLORS.get(method))
+        ax.set(title=f"{predictor} at {fraction:g}", xlabel="prediction")
+    if len(rows):
+        axes[0].set_ylabel(str(rows["target"].iloc[0]) if "target" in rows else "actual")
+        axes[0].legend(fontsize="small")
+    return finish(fig, path)
