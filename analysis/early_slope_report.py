@@ -332,11 +332,9 @@ def write_early_slope_report(
         raise RunDirectoryError(
             f"{', '.join(map(str, paths))}: no robot with a fitness of the methods "
             f"{', '.join(methods) if methods else 'R+L, E+L'} to study")
-    sizes = {r.run: int(r.population_size) if pd.notna(r.population_size) else 20
-             for r in runs.runs.itertuples()}
     study = early_slope_study(
         runs.robots, runs.curves, np.random.default_rng(seed), methods=methods,
-        fractions=fractions, population_size=sizes, n_resamples=n_resamples,
+        fractions=fractions, population_size=runs.population_sizes, n_resamples=n_resamples,
         retrained=None if not retrained else load_retrained(retrained))
     figures = early_slope_figures(study, out)
     report = out / REPORT

@@ -53,6 +53,8 @@ from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
 from evo.record import read_curve
 
 HISTORY = "history.csv"
+DEFAULT_POPULATION = 20
+"""``ga.population_size`` of the GA config, for a config that does not say."""
 EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
     "scheduled_budget", "operator", "replaced", "episodes", "wall_seconds", "error",
     "eval_seed", "curve_source",
@@ -93,8 +95,13 @@ class Runs:
     @property
     def population_size(self) -> int:
         """The initial population size shared by the runs (the largest, if they differ)."""
-        sizes = self.runs["population_size"].dropna()
-        return int(sizes.max()) if len(sizes) else 20
+        return max(self.population_sizes.values(), default=DEFAULT_POPULATION)
+
+    @property
+    def population_sizes(self) -> dict[str, int]:
+        """Run id → initial population size (the GA default where the config has none)."""
+        return {str(r.run): int(r.population_size) if pd.notna(r.population_size)
+                else DEFAULT_POPULATION for r in self.runs.itertuples(index=False)}
 
 
 # ---------------------------------------------------------------- finding runs

@@ -37,7 +37,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis import plots, stats
-from analysis.load import Runs, load_runs
+from analysis.load import RunDirectoryError, Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
 from analysis.tables import METHODS, method_order
 
@@ -288,9 +288,9 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
               "Estimates with bootstrap 95 % CIs; `unit` is the resampling unit (the robot, "
               "or the whole GA run for an evolved method with several seeds).\n\n",
               markdown_table(t.main)]
-    parts += ["\n## Tests\n", _tests_markdown("robots", t.kruskal, t.pairwise)]
+    parts += ["\n## Tests\n", tests_markdown("robots", t.kruskal, t.pairwise)]
     if t.per_run is not None:
-        parts.append(_tests_markdown("per-run means", *t.per_run))
+        parts.append(tests_markdown("per-run means", *t.per_run))
     parts.append("\n## Interaction: does evolution pay off only with learning?\n\n")
     if t.interaction is None:
         parts.append(f"Not computed: needs all four methods (missing: {', '.join(t.missing)}).\n")
@@ -323,7 +323,9 @@ def _order_markdown(summary: pd.DataFrame) -> str:
     return "".join(lines)
 
 
-def _tests_markdown(unit: str, kruskal: stats.GroupTest | None, pairwise: pd.DataFrame) -> str:
+def tests_markdown(unit: str, kruskal: stats.GroupTest | None, pairwise: pd.DataFrame) -> str:
+    """The Kruskal–Wallis result and the pairwise table as Markdown (``unit``: what was
+    compared, e.g. ``"robots"``)."""
     text = f"\n### On {unit}\n\n"
     if kruskal is not None:
         text += (f"Kruskal–Wallis over {', '.join(kruskal.methods)}: "
@@ -400,7 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         report = write_report(args.runs, args.out, seed=args.seed,
                               n_resamples=args.resamples)
-    except (FileNotFoundError, ValueError) as err:
+    except (FileNotFoundError, RunDirectoryError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"report: {report}")
