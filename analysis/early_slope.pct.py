@@ -1,0 +1,103 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: ipynb,.pct.py:percent
+#     text_representation:
+#       extension: .py
+#       format_name: percent
+#       format_version: '1.3'
+#       jupytext_version: 1.19.6
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
+# %% [markdown]
+# # Early-slope study (paper §8, §9)
+#
+# Does the start of a learning curve predict a robot's fitness? The report of
+# `python -m analysis.early_slope`, step by step, on the runs named by the environment
+# variable `EVO_RUNS` (run directories or a multirun folder, separated by `os.pathsep`)
+# and, for the noise ceiling, `EVO_RETRAINED` (directories of retrained structures;
+# empty: no ceiling), or by the parameters cell below:
+#
+# ```bash
+# EVO_RUNS=outputs/ablation/<date> jupyter execute analysis/early_slope.ipynb
+# ```
+
+# %%
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from IPython.display import Image, Markdown, display
+
+from analysis import early_slope as es
+from analysis.early_slope_report import (
+    REJECTION_COLUMNS,
+    correlation_table,
+    early_slope_figures,
+    early_slope_study,
+    recall_table,
+)
+from analysis.load import load_retrained, load_runs
+
+# %% tags=["parameters"]
+runs_path = os.environ.get("EVO_RUNS", "outputs/ablation")  # run dirs, os.pathsep-separated
+retrained_path = os.environ.get("EVO_RETRAINED", "")  # retrained structures; empty: none
+figures_dir = os.environ.get("EVO_FIGURES", "")  # where the PNGs go; empty: a temporary folder
+seed = 0  # bootstrap seed (the CLI's --seed)
+resamples = int(os.environ.get("EVO_RESAMPLES", "2000"))  # per interval (--resamples)
+
+# %% [markdown]
+# ## The runs and the robots studied
+
+# %%
+runs = load_runs(runs_path.split(os.pathsep))
+retrained = load_retrained(retrained_path.split(os.pathsep)) if retrained_path else None
+study = early_slope_study(runs.robots, runs.curves, np.random.default_rng(seed),
+                          population_size=runs.population_sizes, retrained=retrained,
+                          n_resamples=resamples)
+for note in [*runs.notes, *study.notes]:
+    display(Markdown(f"- {note}"))
+display(runs.runs.drop(columns="path"))
+
+# %% [markdown]
+# ## Noise ceiling
+
+# %%
+display(study.ceiling if study.ceiling is not None
+        else "absent: no retrained structures given (EVO_RETRAINED)")
+
+# %% [markdown]
+# ## Rank correlation with the final fitness, and with the return after the cut
+
+# %%
+for target in es.TARGETS:
+    display(Markdown(f"### target: {target}"), correlation_table(study.metrics, target))
+
+# %% [markdown]
+# ## Top-10 % recall per cut and predictor
+
+# %%
+display(recall_table(study.metrics, "fitness"))
+
+# %% [markdown]
+# ## Early rejection: env steps saved against fitness lost
+
+# %%
+display(Markdown("### reject the lowest quarter of predictions"),
+        study.rejection[REJECTION_COLUMNS])
+display(Markdown("### reject below the population minimum"),
+        study.rejection_population[REJECTION_COLUMNS])
+
+# %% [markdown]
+# ## Figures
+
+# %%
+folder = Path(figures_dir or tempfile.mkdtemp(prefix="early-slope-"))
+figures = early_slope_figures(study, folder)
+for stem in figures:
+    display(Markdown(f"### {stem}"), Image(filename=folder / f"{stem}.png"))
