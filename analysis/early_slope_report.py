@@ -266,6 +266,7 @@ def early_slope_markdown(runs: Runs, study: EarlySlopeStudy, figures: dict[str, 
              f"cuts at {', '.join(f'{f:g}' for f in sorted(s.table['fraction'].unique()))} "
              "of each robot's budget.\n\n"]
     parts += [f"- {note}\n" for note in [*runs.notes, *s.notes]]
+    parts += ["\n## Runs\n\n", markdown_table(runs.runs.drop(columns="path"))]
     parts += ["\n## Noise ceiling\n\n", _ceiling_markdown(s.ceiling)]
     for target in es.TARGETS:
         what = ("final fitness (the whole training's mean return, prefix included)"
