@@ -102,15 +102,10 @@ def main() -> None:
                     for _ in range(args.repeats):
                         raw = max(raw, raw_rate(env, steps, rng))
                         fast = max(fast, env_rate(env, steps))
-                    table.add_row(
-                        path.split("/")[-1].removesuffix(".json"),
-                        arena_name,
-                        str(n),
-                        str(nthread),
-                        f"{raw:,.0f}",
-                        f"{fast:,.0f}",
-                        f"{fast / raw:.2f}",
-                    )
+                    row = (path.split("/")[-1].removesuffix(".json"), arena_name, str(n),
+                           str(nthread), f"{raw:,.0f}", f"{fast:,.0f}", f"{fast / raw:.2f}")
+                    table.add_row(*row)
+                    print(*row, flush=True)  # progress; the table comes at the end
                     env.close()
     Console().print(table)
 
