@@ -186,7 +186,7 @@ def noise_ceiling_of(
         .assign(train_seed="original"),
     ], ignore_index=True)
     try:
-        ceiling = es.noise_ceiling(rows, rng, n_resamples=n_resamples)
+        ceiling = es.noise_ceiling(rows, rng, structure="structure", n_resamples=n_resamples)
     except ValueError as err:
         return None, f"Noise ceiling: not computed ({err})."
     return ceiling, (f"Noise ceiling from {int(ceiling['n_structures'])} structures trained "

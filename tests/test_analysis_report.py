@@ -1,0 +1,253 @@
+"""The analysis end to end on a small real ablation: loading, both reports, both notebooks.
+
+One ablation is built per test session: the four methods as four tiny ``+exp=smoke``
+runs in subprocesses (``ga.structure`` and ``learner`` overrides), laid out as a Hydra
+multirun folder (``0/`` ... ``3/``). Everything else reads it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import jupytext
+import nbformat
+import numpy as np
+import pandas as pd
+import pytest
+from nbclient import NotebookClient
+
+from analysis.early_slope_report import write_early_slope_report
+from analysis.load import RunDirectoryError, load_runs
+from analysis.report import write_report
+from analysis.tables import CURVE_COLUMNS, METHODS, ROBOT_COLUMNS
+from evo.record import read_curve
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+OVERRIDES: dict[str, list[str]] = {  # method -> its overrides (R+R, R+L, E+R, E+L)
+    "R+R": ["ga.structure=R", "learner=random"],
+    "R+L": ["ga.structure=R"],
+    "E+R": ["learner=random"],
+    "E+L": [],
+}
+TINY = [  # six robots of four to six short batches each, episodes that end in every batch
+    "executor=serial", "record.rerun=false", "env.task.t_max=40", "learner.rollout_steps=32",
+    "ga.population_size=3", "ga.robot_budget=6", "ga.schedule.initial=1024",
+    "ga.schedule.first=1024", "ga.schedule.last=1536",
+]
+RESAMPLES = "200"
+NOTEBOOKS = ("ablation", "early_slope")
+
+
+@pytest.fixture(scope="session")
+def ablation(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A multirun folder with one tiny run per method, subfolders ``0`` to ``3``."""
+    folder = tmp_path_factory.mktemp("ablation")
+    procs = [
+        subprocess.Popen(
+            [sys.executable, str(REPO / "evo" / "main.py"), "+exp=smoke",
+             f"hydra.run.dir={folder / str(i)}", *TINY, *overrides],
+            cwd=folder, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )
+        for i, overrides in enumerate(OVERRIDES.values())
+    ]
+    for proc, method in zip(procs, OVERRIDES, strict=True):
+        output, _ = proc.communicate(timeout=300)
+        assert proc.returncode == 0, f"{method} run failed:\n{output[-3000:]}"
+    return folder
+
+
+def run_cli(module: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", module, *args], cwd=REPO, env=ENV,
+                          capture_output=True, text=True, timeout=300)
+
+
+def linked_figures(markdown: str, out: Path) -> list[Path]:
+    return [out / link for link in re.findall(r"!\[[^]]*\]\(([^)]+\.png)\)", markdown)]
+
+
+def assert_png(path: Path) -> None:
+    assert path.is_file(), f"missing figure {path}"
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+
+
+# ---------------------------------------------------------------- loading
+
+
+def test_load_gives_one_row_per_history_row_and_the_mcap_curves(ablation: Path) -> None:
+    runs = load_runs(ablation)
+    robots, curves = runs.robots, runs.curves
+    assert list(robots.columns[: len(ROBOT_COLUMNS)]) == list(ROBOT_COLUMNS)
+    assert list(curves.columns[: len(CURVE_COLUMNS)]) == list(CURVE_COLUMNS)
+    assert sorted(runs.runs["run"]) == ["0", "1", "2", "3"]
+    assert dict(zip(runs.runs["run"], runs.runs["method"], strict=True)) == {
+        str(i): m for i, m in enumerate(OVERRIDES)}
+    assert (robots["seed"] == 0).all() and runs.population_size == 3
+    for run in runs.runs.itertuples():
+        history = pd.read_csv(ablation / run.run / "history.csv", dtype={"parents": str})
+        rows = robots[robots["run"] == run.run]
+        assert len(rows) == len(history) == 6, f"run {run.run}: one robots row per history row"
+        assert rows["name"].tolist() == history["name"].tolist()
+        assert np.allclose(rows["fitness"], history["fitness"])
+        assert rows["budget"].tolist() == history["env_steps"].tolist()
+        assert rows["parents"].tolist() == history["parents"].fillna("").str.replace(
+            ";", ",").tolist()
+        assert (rows["curve_source"] == "mcap").all() and not runs.notes
+        for name in rows["name"]:
+            expected = read_curve(ablation / run.run / "evals" / f"{name}.mcap")
+            got = curves[(curves["run"] == run.run) & (curves["name"] == name)]
+            got = got.drop(columns=["run", "name"]).reset_index(drop=True)
+            pd.testing.assert_frame_equal(got[list(expected.columns)], expected,
+                                          check_dtype=False, obj=f"curve of {run.run}/{name}")
+
+
+def test_load_falls_back_to_the_csv_only_when_the_mcap_is_missing(
+    ablation: Path, tmp_path: Path
+) -> None:
+    run = shutil.copytree(ablation / "3", tmp_path / "E+L_seed0")
+    name = pd.read_csv(run / "history.csv")["name"].iloc[-1]
+    expected = read_curve(run / "evals" / f"{name}.mcap")
+    (run / "evals" / f"{name}.mcap").unlink()
+    with pytest.warns(UserWarning, match=rf"MCAP file is missing \({name}\)"):
+        runs = load_runs(run)
+    robots = runs.robots.set_index("name")
+    assert robots.loc[name, "curve_source"] == "csv"
+    assert (robots.drop(index=name)["curve_source"] == "mcap").all()
+    assert any(name in note for note in runs.notes)
+    got = runs.curves[runs.curves["name"] == name].drop(columns=["run", "name"])
+    pd.testing.assert_frame_equal(got.reset_index(drop=True)[list(expected.columns)],
+                                  expected, check_dtype=False)
+
+
+def test_load_errors_name_the_directory_or_file(ablation: Path, tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        load_runs(tmp_path / "nowhere")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(RunDirectoryError, match="empty.*no history.csv"):
+        load_runs(tmp_path / "empty")
+    run = shutil.copytree(ablation / "0", tmp_path / "broken")
+    (run / "config.yaml").unlink()
+    with pytest.raises(RunDirectoryError, match=r"broken/config.yaml"):
+        load_runs(run)
+
+
+# ---------------------------------------------------------------- ablation report
+
+
+def test_report_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    done = run_cli("analysis.report", str(ablation), "--out", str(out), "--resamples", RESAMPLES)
+    assert done.returncode == 0, done.stderr
+    text = (out / "report.md").read_text()
+    for method in METHODS:
+        assert f"| {method} | 6 | 1 | robot |" in text, f"{method} row of the main table"
+    for heading in ("## Fitness per method", "Kruskal–Wallis", "Mann–Whitney",
+                    "interaction (E+L − R+L) − (E+R − R+R)", "## Beside the paper",
+                    "reward scales differ"):
+        assert heading in text, heading
+    assert "Missing: none" in text
+    stems = {p.stem for p in linked_figures(text, out)}
+    expected = {"fitness_vs_RR", "best_so_far", *(f"evolution_{i}" for i in range(4)),
+                *(f"curves_{i}" for i in range(4))}
+    assert stems == expected
+    for path in linked_figures(text, out):
+        assert_png(path)
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary["method"]) == set(METHODS) and (summary["n"] == 6).all()
+
+
+def test_report_lists_missing_methods_instead_of_failing(ablation: Path, tmp_path: Path) -> None:
+    report = write_report([ablation / "1", ablation / "3"], tmp_path, n_resamples=100)
+    text = report.read_text()
+    assert "Missing: R+R, E+R." in text
+    assert "| R+R | 0 | 0 | missing |" in text and "| E+R | 0 | 0 | missing |" in text
+    assert "Not computed: needs all four methods" in text
+    assert "| R+L | E+L |" in text, "the pair that is there is still tested"
+    for path in linked_figures(text, tmp_path):
+        assert_png(path)
+    done = run_cli("analysis.report", str(tmp_path / "nowhere"), "--out", str(tmp_path))
+    assert done.returncode == 2 and "nowhere" in done.stderr
+
+
+# ---------------------------------------------------------------- early-slope report
+
+
+def test_early_slope_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path) -> None:
+    out = tmp_path / "early"
+    done = run_cli("analysis.early_slope", str(ablation), "--out", str(out),
+                   "--resamples", RESAMPLES)
+    assert done.returncode == 0, done.stderr
+    text = (out / "early_slope.md").read_text()
+    for method in METHODS:
+        assert f"| {method} |" in text, f"{method} in the runs table"
+    assert "12 robots of R+L, E+L" in text
+    assert "Absent: no retrained structures" in text
+    for heading in ("Rank correlation with the final fitness",
+                    "Rank correlation with the mean return after the cut",
+                    "Top-10 % recall", "reject the lowest quarter", "reject below the population"):
+        assert heading in text, heading
+    for predictor in ("value", "slope", "area", "curve", "value+slope"):
+        assert f"| {predictor} |" in text
+    stems = {p.stem for p in linked_figures(text, out)}
+    assert stems == {"rank_fitness", "rank_after_cut", "rejection_quantile",
+                     "rejection_population", "scatter"}
+    for path in linked_figures(text, out):
+        assert_png(path)
+    metrics = pd.read_csv(out / "rank_metrics.csv")
+    assert set(metrics["metric"]) == {"spearman", "kendall", "top_recall"}
+    late = metrics[(metrics["fraction"] == 0.75) & (metrics["predictor"] == "value")]
+    assert late["estimate"].notna().all(), "a late cut sees episodes of every robot"
+    assert {"steps_saved", "fitness_lost"} <= set(pd.read_csv(out / "rejection.csv").columns)
+
+
+def test_early_slope_noise_ceiling_from_retrained_structures(
+    ablation: Path, tmp_path: Path
+) -> None:
+    robots = load_runs([ablation / "1", ablation / "3"]).robots
+    rng = np.random.default_rng(0)
+    for i, robot in enumerate(robots.itertuples()):  # a second training, slightly noisy
+        train = tmp_path / "retrained" / f"{i}"
+        train.mkdir(parents=True)
+        fitness = robot.fitness + 1e-4 * rng.normal()
+        (train / "summary.json").write_text(json.dumps(
+            dict(robot=robot.name, seed=7, fitness=fitness, env_steps=int(robot.budget))))
+    report = write_early_slope_report([ablation / "1", ablation / "3"], tmp_path / "out",
+                                      retrained=[tmp_path / "retrained"], n_resamples=100)
+    text = report.read_text()
+    assert "Spearman ρ between trainings of the same structures" in text
+    assert re.search(r"\(\d+ structures, 2 seeds\)", text)
+
+
+# ---------------------------------------------------------------- notebooks
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_runs_top_to_bottom_on_the_ablation(
+    ablation: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str
+) -> None:
+    notebook = nbformat.read(REPO / "analysis" / f"{name}.ipynb", as_version=4)
+    script = jupytext.read(REPO / "analysis" / f"{name}.pct.py")
+    assert [c.source for c in notebook.cells] == [c.source for c in script.cells], (
+        f"analysis/{name}.ipynb and its paired .pct.py differ: run jupytext --sync")
+    monkeypatch.setenv("EVO_RUNS", str(ablation))
+    monkeypatch.setenv("EVO_FIGURES", str(tmp_path))
+    monkeypatch.setenv("EVO_RESAMPLES", RESAMPLES)
+    monkeypatch.setenv("MUJOCO_GL", ENV["MUJOCO_GL"])
+    NotebookClient(notebook, timeout=300, kernel_name="python3",
+                   resources={"metadata": {"path": str(REPO)}}).execute()
+    outputs = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs]
+    assert not [o for o in outputs if o.output_type == "error"]
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    figures = sorted(tmp_path.glob("*.png"))
+    assert figures and len(images) == len(figures), "every figure written and shown"
+    tables = "".join(o.get("data", {}).get("text/html", "") for o in outputs)
+    for method in METHODS:
+        assert f">{method}<" in tables, f"{method} in the notebook's tables"
