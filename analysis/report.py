@@ -105,8 +105,13 @@ def ablation_tables(
 
     Returns:
         The tables; what cannot be computed is None and explained in ``notes``.
+
+    Raises:
+        ValueError: If no robot has a fitness.
     """
     scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    if scored.empty:
+        raise ValueError(f"no robot with a fitness among {len(robots)} robots")
     present = method_order(scored["method"])
     missing = [m for m in METHODS if m not in present]
     notes = []
@@ -371,6 +376,9 @@ def write_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     runs = load_runs(paths)
+    if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
+        raise RunDirectoryError(
+            f"{', '.join(map(str, paths))}: no robot with a fitness (no evaluation finished)")
     tables = ablation_tables(runs.robots, np.random.default_rng(seed),
                              n_resamples=n_resamples)
     figures = ablation_figures(runs.robots, runs.curves, out,
