@@ -24,7 +24,8 @@ from nbclient import NotebookClient
 
 from analysis.early_slope_report import write_early_slope_report
 from analysis.load import RunDirectoryError, load_runs
-from analysis.report import write_report
+from analysis.report import ablation_tables, write_report
+from analysis.synthetic import synthetic_robots
 from analysis.tables import CURVE_COLUMNS, METHODS, ROBOT_COLUMNS
 from evo.record import read_curve
 
@@ -175,6 +176,20 @@ def test_report_lists_missing_methods_instead_of_failing(ablation: Path, tmp_pat
         assert_png(path)
     done = run_cli("analysis.report", str(tmp_path / "nowhere"), "--out", str(tmp_path))
     assert done.returncode == 2 and "nowhere" in done.stderr
+
+
+def test_with_three_seeds_per_method_runs_are_the_unit_and_per_run_means_are_tested() -> None:
+    rng = np.random.default_rng(0)
+    means = {"R+R": -0.8, "R+L": -0.5, "E+R": -0.7, "E+L": 0.5}
+    robots = synthetic_robots(rng, means=means, seeds=(0, 1, 2), n_robots=12,
+                              population_size=4)
+    tables = ablation_tables(robots, rng, n_resamples=200)
+    units = tables.main.set_index("method")["unit"]
+    assert units.to_dict() == {"R+R": "robot", "R+L": "robot", "E+R": "run", "E+L": "run"}
+    assert tables.per_run is not None and len(tables.per_run[1]) == 6
+    assert (tables.per_run[1][["n_a", "n_b"]] == 3).all().all(), "one mean per run"
+    interaction = tables.interaction.set_index("contrast")["estimate"]  # type: ignore[union-attr]
+    assert interaction.iloc[2] == pytest.approx(interaction.iloc[1] - interaction.iloc[0])
 
 
 # ---------------------------------------------------------------- early-slope report
