@@ -1,5 +1,5 @@
 """Every Hydra config composes, the robot settings become typed objects, bad values name
-their key, and the demo experiment runs end to end in a subprocess.
+their key, and the robots task runs end to end in a subprocess.
 
 The compose test walks ``conf/`` as it is, so config groups added later are covered
 without editing this file.
@@ -149,10 +149,10 @@ def run_main(*overrides: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     )
 
 
-def test_demo_experiment_writes_valid_robots_to_its_run_dir(tmp_path: Path) -> None:
+def test_robots_task_writes_valid_robots_to_its_run_dir(tmp_path: Path) -> None:
     run_dir, cwd = tmp_path / "run", tmp_path / "cwd"
     cwd.mkdir()
-    done = run_main("+exp=demo", "robots.count=3", f"hydra.run.dir={run_dir}", cwd=cwd)
+    done = run_main("task=robots", "robots.count=3", f"hydra.run.dir={run_dir}", cwd=cwd)
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
     files = sorted((run_dir / "robots").glob("*.json"))

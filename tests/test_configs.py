@@ -1,0 +1,350 @@
+"""The evolution's configs: every experiment and every group option composes and builds
+the typed objects of a run (through ``evo.main.evolve_parts``, as a run does), the
+experiments hold the paper's numbers, bad values stop ``python evo/main.py`` at start
+with exit code 2 and a message naming the key, and the ablation runs as a multirun.
+
+tests/test_robot_config.py covers the robot settings (morphology) of every config; this
+file covers the GA, executors, learners' method labels and the experiments.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.errors import HydraException
+from omegaconf import DictConfig, OmegaConf
+
+from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
+from evo.components.ga import BudgetSchedule, Evolve, RandomStructures, ReplaceWorst, Roulette
+from evo.config import ConfigError, typed
+from evo.envs.task import EnvConfig
+from evo.evolution import GAConfig
+from evo.learners.common import LearnerConfig
+from evo.main import (
+    TASKS,
+    EvolveParts,
+    _physics,
+    _resume_in_place,
+    _write_config,
+    evolve_parts,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+CONF = REPO / "conf"
+EXPERIMENTS = sorted(p.stem for p in (CONF / "exp").glob("*.yaml"))
+GROUPS = sorted(p.name for p in CONF.iterdir() if p.is_dir() and p.name not in ("exp", "hydra"))
+METHODS = {"E+L", "E+R", "R+L", "R+R"}
+EXECUTORS = {"local": LocalExecutor, "serial": SerialExecutor, "ray": RayExecutor}
+
+
+@pytest.fixture(scope="module")
+def hydra_conf() -> Iterator[None]:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        yield
+
+
+@pytest.fixture(autouse=True)
+def no_ray_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """RayExecutor builds against a pretend 4-CPU cluster instead of starting Ray."""
+    try:
+        import ray
+    except ImportError:
+        return
+    monkeypatch.setattr(ray, "is_initialized", lambda: True)
+    monkeypatch.setattr(ray, "cluster_resources", lambda: {"CPU": 4.0})
+
+
+def build(cfg: DictConfig, out: Path) -> EvolveParts:
+    parts = evolve_parts(cfg, out)
+    assert isinstance(parts.ga, GAConfig)
+    assert isinstance(parts.strategy, Evolve | RandomStructures)
+    assert isinstance(parts.replacement, ReplaceWorst)
+    assert isinstance(parts.schedule, BudgetSchedule)
+    assert isinstance(parts.job.learner, LearnerConfig)
+    assert isinstance(parts.job.env, EnvConfig)
+    assert parts.job.run_dir == str(out)
+    assert parts.job.method in METHODS
+    assert isinstance(parts.executor, tuple(EXECUTORS.values()))
+    assert parts.executor.workers >= 1
+    return parts
+
+
+def sweep(cfg: DictConfig) -> list[list[str]]:
+    """Every job of a multirun experiment, as override lists (the basic sweeper's grid)."""
+    params = cfg.hydra.sweeper.get("params") or {}
+    axes = [[f"{key}={v}" for v in str(values).split(",")] for key, values in params.items()]
+    return [list(job) for job in itertools.product(*axes)]
+
+
+# ---- every option composes and builds -------------------------------------------------------
+
+
+def group_options() -> list[tuple[str, str]]:
+    return [(g, p.stem) for g in GROUPS for p in sorted((CONF / g).glob("*.yaml"))]
+
+
+@pytest.mark.parametrize(
+    ("group", "option"), group_options(), ids=[f"{g}={o}" for g, o in group_options()]
+)
+def test_every_group_option_builds_an_evolution(
+    hydra_conf: None, tmp_path: Path, group: str, option: str
+) -> None:
+    cfg = compose("config", overrides=[f"{group}={option}"])
+    parts = build(cfg, tmp_path)
+    if group == "executor":
+        assert type(parts.executor) is EXECUTORS[option]
+    if group == "learner":
+        assert parts.job.learner.update is (option == "ppo")
+        assert parts.job.method == ("E+L" if option == "ppo" else "E+R")
+    if group == "env":
+        assert parts.job.env.name == option
+        assert (parts.job.env.arena.n_rocks > 0) is (option == "cluttered")
+    if group == "ga":
+        assert isinstance(parts.strategy, Evolve) and isinstance(parts.strategy.selection, Roulette)
+
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_every_experiment_composes_and_builds(
+    hydra_conf: None, tmp_path: Path, experiment: str
+) -> None:
+    cfg = compose("config", overrides=[f"+exp={experiment}"], return_hydra_config=True)
+    assert cfg.task in TASKS, f"{experiment}: unknown task {cfg.task}"
+    jobs = sweep(cfg) if str(cfg.hydra.mode) == "RunMode.MULTIRUN" else [[]]
+    for job in jobs:
+        job_cfg = compose("config", overrides=[f"+exp={experiment}", *job])
+        if job_cfg.task == "evolve":
+            build(job_cfg, tmp_path)
+        else:  # train / evaluate: one robot, the same typed settings
+            assert isinstance(typed(LearnerConfig, job_cfg.learner, "learner"), LearnerConfig)
+            assert isinstance(typed(EnvConfig, job_cfg.env, "env"), EnvConfig)
+            _physics(job_cfg)
+    text = (CONF / "exp" / f"{experiment}.yaml").read_text()
+    assert text.startswith("# @package _global_"), "experiments are global overlays"
+
+
+def test_an_unknown_group_option_names_the_group(hydra_conf: None) -> None:
+    with pytest.raises(HydraException, match="learner/teleport"):
+        compose("config", overrides=["learner=teleport"])
+
+
+# ---- the experiments hold the paper's numbers ------------------------------------------------
+
+
+def parts_of(experiment: str, out: Path, *overrides: str) -> EvolveParts:
+    return build(compose("config", overrides=[f"+exp={experiment}", *overrides]), out)
+
+
+@pytest.mark.parametrize(("experiment", "arena"), [("paper_clean", 0), ("paper_cluttered", 40)])
+def test_paper_experiments(hydra_conf: None, tmp_path: Path, experiment: str, arena: int) -> None:
+    parts = parts_of(experiment, tmp_path)
+    assert (parts.ga.population_size, parts.ga.robot_budget) == (20, 100)
+    budgets = [parts.schedule.budget(b, 20, 100) for b in range(100)]
+    assert budgets[:21] == [50_000] * 21 and budgets[99] == 250_000
+    assert budgets == sorted(budgets)
+    assert parts.job.learner.num_envs >= 12 and parts.job.learner.update
+    assert parts.job.env.arena.n_rocks == arena
+    assert parts.job.method == "E+L"
+    # The arena can still be chosen on the command line.
+    other = "cluttered" if arena == 0 else "clean"
+    assert parts_of(experiment, tmp_path, f"env={other}").job.env.name == other
+
+
+def test_smoke_and_demo_are_small_evolutions(hydra_conf: None, tmp_path: Path) -> None:
+    smoke = parts_of("smoke", tmp_path)
+    assert smoke.ga.robot_budget <= 10 and smoke.schedule.budget(7, 4, 8) <= 5_000
+    demo = parts_of("demo", tmp_path)
+    assert (demo.ga.population_size, demo.ga.robot_budget) == (6, 14)
+    budgets = [demo.schedule.budget(b, 6, 14) for b in range(14)]
+    assert min(budgets) >= 20_000 and max(budgets) <= 150_000 and budgets == sorted(budgets)
+    assert demo.job.env.name == "clean" and demo.job.learner.num_envs == 32
+    assert demo.job.method == "E+L"
+
+
+@pytest.mark.parametrize("experiment", ["ablation", "ablation_smoke"])
+def test_ablation_is_a_multirun_of_the_four_methods(
+    hydra_conf: None, tmp_path: Path, experiment: str
+) -> None:
+    cfg = compose("config", overrides=[f"+exp={experiment}"], return_hydra_config=True)
+    assert str(cfg.hydra.mode) == "RunMode.MULTIRUN", "runs as a sweep without -m"
+    assert "seed" in cfg.hydra.sweeper.params, "the GA seed is a sweep dimension"
+    labels = set()
+    for job in sweep(cfg):
+        overrides = [f"+exp={experiment}", *job]
+        parts = build(compose("config", overrides=overrides), tmp_path)
+        labels.add(parts.job.method)
+        job_cfg = compose("config", overrides=overrides, return_hydra_config=True)
+        assert job_cfg.hydra.sweep.subdir == f"{parts.job.method}_seed{job_cfg.seed}"
+        budgets = {
+            parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
+            for b in range(parts.ga.robot_budget)
+        }
+        assert len(budgets) == 1, "every robot of the ablation gets the same budget"
+        if experiment == "ablation":
+            assert budgets == {30_000} and 90 <= parts.ga.robot_budget <= 110
+    assert labels == METHODS
+    # More seeds are a command-line choice (seed=0,1,2 there; quoted in the compose API).
+    more = compose(
+        "config",
+        overrides=[f"+exp={experiment}", "hydra.sweeper.params.seed='0,1,2'"],
+        return_hydra_config=True,
+    )
+    assert len(sweep(more)) == 12
+
+
+# ---- bad values stop the run at start ---------------------------------------------------------
+
+BAD_VALUES = [
+    ("ga.population_size=-1", "ga: population_size must be >= 2, got -1"),
+    ("ga.population_size=1", "ga: population_size must be >= 2"),
+    ("ga.robot_budget=0", "ga: robot_budget (0) must be >= population_size"),
+    ("ga.structure=X", "ga.structure: expected E (evolve) or R (random), got 'X'"),
+    ("ga.schedule.initial=0", "ga.schedule: initial must be >= 1 env step, got 0"),
+    ("ga.schedule.last=-5", "ga.schedule: last must be >= 1 env step"),
+    ("+ga.colour=red", "ga: unknown key(s) colour"),
+    ("+ga.schedule.ramp=2", "ga.schedule: unknown key(s) ramp"),
+    ("ga.selection.epsilon=0", "ga.selection: epsilon must be positive"),
+    ("ga.selection._target_=nowhere.Nothing", "ga.selection._target_: no class"),
+    ("ga.mutation_rate=2", "ga: mutation_rate must be in [0, 1]"),
+    ("ga.mutation_operators=[teleport]", "ga: unknown mutation operators ['teleport']"),
+    ("ga.crossover_tries=many", "ga.crossover_tries: expected an integer, got 'many'"),
+    ("executor.workers=-1", "executor: need workers >= 0"),
+    ("+executor.colour=red", "executor: unknown key(s) colour"),
+    ("learner.update=maybe", "learner.update: expected true or false, got 'maybe'"),
+    ("learner.num_envs=0", "learner: num_envs must be >= 1"),
+]
+
+
+@pytest.mark.parametrize(("override", "message"), BAD_VALUES, ids=[b[0] for b in BAD_VALUES])
+def test_bad_values_name_their_key(
+    hydra_conf: None, tmp_path: Path, override: str, message: str
+) -> None:
+    cfg = compose("config", overrides=["+exp=smoke", override])
+    with pytest.raises(ConfigError) as info:
+        evolve_parts(cfg, tmp_path)
+    assert message in str(info.value), str(info.value)
+
+
+ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+
+
+def start_main(*args: str, cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, str(REPO / "evo" / "main.py"), *args],
+        cwd=cwd,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def fake_run_dir(path: Path, config: str = "seed: 0\n") -> Path:
+    path.mkdir(parents=True)
+    (path / "config.yaml").write_text(config)
+    (path / "state.json").write_text("{}")
+    return path
+
+
+def test_main_stops_at_start_with_exit_2_naming_the_key(tmp_path: Path) -> None:
+    # (command-line arguments, what stderr must say); all started at once.
+    cases: list[tuple[list[str], str]] = [
+        (["ga.population_size=-3"], "ga: population_size must be >= 2, got -3"),
+        (["ga.structure=Q"], "ga.structure: expected E (evolve) or R (random), got 'Q'"),
+        (["ga.schedule.first=0"], "ga.schedule: first must be >= 1 env step, got 0"),
+        (["+ga.colour=red"], "ga: unknown key(s) colour"),
+        (
+            [f"resume={fake_run_dir(tmp_path / 'old')}", "executor=ray"],
+            "resume: a resumed run keeps the config it was started with",
+        ),
+    ]
+    procs = []
+    for i, (args, _) in enumerate(cases):
+        cwd = tmp_path / f"cwd{i}"
+        cwd.mkdir()
+        run_dir = [] if args[0].startswith("resume=") else [f"hydra.run.dir={tmp_path / f'run{i}'}"]
+        procs.append((start_main("+exp=smoke", *args, *run_dir, cwd=cwd), cwd))
+    for (args, expected), (proc, cwd) in zip(cases, procs, strict=True):
+        _, stderr = proc.communicate(timeout=180)
+        assert proc.returncode == 2, (args, proc.returncode, stderr[-2000:])
+        assert f"error: bad config: {expected}" in stderr, (args, stderr[-2000:])
+        assert "Traceback" not in stderr
+        assert list(cwd.iterdir()) == [], f"{args}: wrote into the working directory"
+    for i in range(4):  # nothing was evaluated
+        assert not (tmp_path / f"run{i}" / "robots").exists()
+
+
+def test_resume_of_a_directory_that_is_no_run_stops_before_hydra_creates_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as info:
+        _resume_in_place(["evo/main.py", f"resume={tmp_path / 'nowhere'}"])
+    assert info.value.code == 2
+    assert f"resume: {tmp_path / 'nowhere'} is not an evo run directory" in capsys.readouterr().err
+    assert not (tmp_path / "nowhere").exists()
+    run_dir = fake_run_dir(tmp_path / "run")
+    argv = _resume_in_place(["evo/main.py", f"resume={run_dir}"])
+    assert f"hydra.run.dir={run_dir}" in argv and "hydra.output_subdir=null" in argv
+
+
+def test_a_new_run_in_a_run_directory_must_have_its_config(
+    hydra_conf: None, tmp_path: Path
+) -> None:
+    cfg = compose("config", overrides=["+exp=smoke"])
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    _write_config(cfg, fresh)
+    saved = (fresh / "config.yaml").read_text()
+    assert OmegaConf.create(saved) == OmegaConf.create(OmegaConf.to_yaml(cfg, resolve=True))
+    (fresh / "state.json").write_text("{}")
+    _write_config(cfg, fresh)  # the same command again continues the run
+    other = compose("config", overrides=["+exp=smoke", "seed=5"])
+    with pytest.raises(ConfigError, match=f"hydra.run.dir: {fresh} already holds a run"):
+        _write_config(other, fresh)
+    assert (fresh / "config.yaml").read_text() == saved, "the run's config was replaced"
+
+
+# ---- the ablation as a multirun, end to end -----------------------------------------------------
+
+
+@pytest.mark.slow
+def test_ablation_multirun_runs_the_four_methods(tmp_path: Path) -> None:
+    sweep_dir = tmp_path / "ablation"
+    tiny = [
+        "executor=serial",
+        "ga.population_size=2",
+        "ga.robot_budget=3",
+        "ga.schedule.initial=128",
+        "ga.schedule.first=128",
+        "ga.schedule.last=128",
+        "learner.num_envs=2",
+        "learner.epochs=1",
+        "learner.minibatch_size=64",
+        "learner.hidden=[16]",
+        "env.task.t_max=30",
+        "record=off",
+    ]
+    proc = start_main(
+        "+exp=ablation_smoke", *tiny, "seed=0,1", f"hydra.sweep.dir={sweep_dir}", cwd=tmp_path
+    )
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr[-3000:]
+    jobs = sorted(p.name for p in sweep_dir.iterdir() if p.is_dir())
+    assert jobs == sorted(f"{m}_seed{s}" for m in METHODS for s in (0, 1)), jobs
+    for job in jobs:
+        summary = json.loads((sweep_dir / job / "summary.json").read_text())
+        method, seed = job.split("_seed")
+        assert summary["method"] == method
+        assert summary["complete"] and summary["robots_evaluated"] == 3
+        history = (sweep_dir / job / "history.csv").read_text().splitlines()
+        assert len(history) == 4 and all(f",{summary['method']}," in r for r in history[1:])
+        config = OmegaConf.load(sweep_dir / job / "config.yaml")
+        assert config.ga.schedule.last == 128 and config.seed == int(seed)
+    assert (sweep_dir / "multirun.yaml").is_file()

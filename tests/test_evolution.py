@@ -1,0 +1,592 @@
+"""The evolution loop (``evo/evolution.py``) and ``python evo/main.py`` runs of it.
+
+Two tiers:
+
+* in-process runs with a fast stand-in for the evaluation (a seeded function of the
+  robot, no physics), so the loop's rules, its failure handling and its resume after a
+  crash at every point can be checked exhaustively;
+* end-to-end runs of ``python evo/main.py`` in a subprocess with real training: the
+  smoke experiment, and runs killed with SIGKILL at several points and resumed with
+  ``python evo/main.py resume=<run dir>``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import evo.evolution as evolution_module
+from evo.components.executors import LocalExecutor, SerialExecutor
+from evo.components.ga import (
+    BudgetSchedule,
+    Evolve,
+    Offspring,
+    RandomStructures,
+    ReplaceWorst,
+    Roulette,
+)
+from evo.envs.task import EnvConfig
+from evo.evaluation import Job, Outcome, Task
+from evo.evolution import Evolution, GAConfig, evaluation_seed
+from evo.learners.common import LearnerConfig
+from evo.robot import OperatorError, load_robot
+from evo.robot.builder import PhysicsParams
+
+REPO = Path(__file__).resolve().parents[1]
+SCHEDULE = BudgetSchedule(initial=100, first=200, last=1000)
+
+
+# ---- a fast stand-in for the evaluation ---------------------------------------------------
+
+
+def fake_evaluate(task: Task, job: Job) -> Outcome:
+    """A fitness in [-1, 1] that depends only on the robot and the evaluation's seed."""
+    digest = hashlib.sha256(f"{task.robot}/{task.seed}".encode()).digest()
+    fitness = int.from_bytes(digest[:4], "little") / 2**32 * 2 - 1
+    return Outcome(
+        task.birth,
+        task.name,
+        fitness=fitness,
+        env_steps=task.budget,
+        episodes=3,
+        wall_seconds=0.001,
+    )
+
+
+def dies_on_birth_3(task: Task, job: Job) -> Outcome:
+    """The evaluation of birth 3 kills its worker process (run in a process pool)."""
+    if task.birth == 3:
+        os._exit(13)
+    time.sleep(0.05)
+    return fake_evaluate(task, job)
+
+
+class Crash(BaseException):
+    """Stands for the process dying: nothing catches it."""
+
+
+def make_evolution(
+    run_dir: Path,
+    *,
+    structure: str = "E",
+    population: int = 4,
+    budget: int = 14,
+    seed: int = 3,
+    executor: Any = None,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+) -> Evolution:
+    strategy = Evolve(Roulette()) if structure == "E" else RandomStructures()
+    return Evolution(
+        run_dir,
+        ga=GAConfig(population, budget),
+        strategy=strategy,
+        replacement=ReplaceWorst(),
+        schedule=SCHEDULE,
+        job=Job(PhysicsParams(), EnvConfig(), LearnerConfig(), str(run_dir), f"{structure}+L"),
+        executor=executor or SerialExecutor(),
+        seed=seed,
+        on_result=on_result,
+    )
+
+
+@pytest.fixture
+def fake(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
+
+
+def read_history(run_dir: Path) -> pd.DataFrame:
+    """history.csv with empty text cells as "" (and a failed robot's fitness as NaN)."""
+    text = {column: str for column in ("parents", "replaced", "error")}
+    history = pd.read_csv(run_dir / "history.csv", dtype=text, keep_default_na=False)
+    history["fitness"] = pd.to_numeric(history["fitness"], errors="coerce")
+    return history
+
+
+def comparable(history: pd.DataFrame) -> pd.DataFrame:
+    """The history without wall times, in birth order."""
+    return history.drop(columns=["wall_seconds"]).sort_values("birth").reset_index(drop=True)
+
+
+def check_steady_state(run_dir: Path, population_size: int, robot_budget: int, seed: int) -> None:
+    """Replay history.csv by the paper's rules; every recorded decision must match."""
+    history = read_history(run_dir)
+    assert sorted(history["birth"]) == list(range(robot_budget)), "births lost or repeated"
+    assert history["name"].is_unique
+    robots = {p.stem for p in (run_dir / "robots").glob("*.json")}
+    assert robots == set(history["name"]), "robot files and history rows differ"
+    population: dict[str, float] = {}
+    for row in history.itertuples():
+        assert row.seed == evaluation_seed(seed, row.birth)
+        assert row.budget == SCHEDULE.budget(row.birth, population_size, robot_budget)
+        ok = not row.error and math.isfinite(row.fitness)
+        if isinstance(row.parents, str) and row.parents:
+            for parent in row.parents.split(";"):
+                assert parent in population, f"{row.name}: parent {parent} not in population"
+        if len(population) < population_size and not row.parents:
+            assert row.accepted == ok and not row.replaced
+            if ok:
+                population[row.name] = row.fitness
+        else:
+            worst = min(population, key=lambda n: population[n])
+            accepted = ok and row.fitness > population[worst]
+            assert row.accepted == accepted, f"{row.name}: accepted should be {accepted}"
+            if accepted:
+                assert row.replaced == worst
+                del population[worst]
+                population[row.name] = row.fitness
+            else:
+                assert not row.replaced
+        if population:
+            assert row.population_best == pytest.approx(max(population.values()))
+            assert row.population_mean == pytest.approx(np.mean(list(population.values())))
+        assert len(population) <= population_size
+    assert len(population) == population_size
+    saved = json.loads((run_dir / "population.json").read_text())["population"]
+    assert {m["name"]: m["fitness"] for m in saved} == pytest.approx(population)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    done = history[history["error"] == ""]
+    assert summary["complete"] and summary["robots_evaluated"] == robot_budget
+    assert summary["best_fitness"] == pytest.approx(done["fitness"].max())
+
+
+# ---- the loop's rules ----------------------------------------------------------------------
+
+
+def test_evolution_follows_the_steady_state_rules(tmp_path: Path, fake: None) -> None:
+    summary = make_evolution(tmp_path, population=5, budget=40).run()
+    check_steady_state(tmp_path, 5, 40, seed=3)
+    history = read_history(tmp_path)
+    offspring = history[history["birth"] >= 5]
+    assert (offspring["operator"] == "crossover").all()
+    assert offspring["parents"].str.count(";").eq(1).all(), "two parents per offspring"
+    assert 0 < offspring["accepted"].sum() < len(offspring), "replacement is a real choice"
+    assert summary["accept_rate"] == pytest.approx(offspring["accepted"].mean())
+
+
+def test_random_structure_strategy_has_no_parents(tmp_path: Path, fake: None) -> None:
+    make_evolution(tmp_path, structure="R", population=4, budget=20).run()
+    check_steady_state(tmp_path, 4, 20, seed=3)
+    history = read_history(tmp_path)
+    assert (history["parents"] == "").all() and (history["operator"] == "random").all()
+    assert (history["method"] == "R+L").all()
+
+
+class NoCrossover:
+    """A structure strategy ``E`` whose breeding always fails."""
+
+    code = "E"
+
+    def initial(self, rng: np.random.Generator) -> Offspring:
+        return RandomStructures().initial(rng)
+
+    def breed(self, population: Any, rng: np.random.Generator) -> Offspring:
+        raise OperatorError("no crossover site")
+
+
+def test_failed_breeding_falls_back_to_a_random_robot(tmp_path: Path, fake: None) -> None:
+    run = make_evolution(tmp_path, population=3, budget=8)
+    run.strategy = NoCrossover()
+    assert run.run()["complete"]
+    check_steady_state(tmp_path, 3, 8, seed=3)
+    history = read_history(tmp_path)
+    assert (history["operator"][3:] == "random-fallback").all()
+    assert (history["parents"] == "").all()
+
+
+def test_the_same_seed_gives_the_same_run(tmp_path: Path, fake: None) -> None:
+    make_evolution(tmp_path / "a", seed=8).run()
+    make_evolution(tmp_path / "b", seed=8).run()
+    make_evolution(tmp_path / "c", seed=9).run()
+    a, b, c = (comparable(read_history(tmp_path / x)) for x in "abc")
+    pd.testing.assert_frame_equal(a, b)
+    assert list(a["name"]) != list(c["name"])
+
+
+def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def flaky(task: Task, job: Job) -> Outcome:
+        if task.birth in (1, 6):
+            raise RuntimeError(f"simulated crash of {task.name}")
+        return fake_evaluate(task, job)
+
+    monkeypatch.setattr(evolution_module, "evaluate", flaky)
+    summary = make_evolution(tmp_path, population=4, budget=12).run()
+    history = read_history(tmp_path).set_index("birth")
+    for birth in (1, 6):
+        row = history.loc[birth]
+        assert "simulated crash" in row["error"], row["error"]
+        assert math.isnan(row["fitness"]) and not row["accepted"]
+    assert summary["failed"] == 2 and summary["complete"]
+    # The failed initial robot left a gap that the next random robot filled.
+    assert history.loc[4, "operator"] == "random" and history.loc[4, "accepted"]
+    check_steady_state(tmp_path, 4, 12, seed=3)
+
+
+def test_an_error_inside_training_is_recorded_with_its_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import evo.evaluation as evaluation
+
+    def broken_learner(*args: Any, **kwargs: Any) -> Any:
+        raise FloatingPointError("policy diverged")
+
+    monkeypatch.setattr(evaluation, "get_learner", lambda config: broken_learner)
+    summary = make_evolution(tmp_path, population=2, budget=3).run()
+    history = read_history(tmp_path)
+    assert len(history) == 3 and history["fitness"].isna().all()
+    assert history["error"].str.contains("FloatingPointError: policy diverged").all()
+    assert summary["failed"] == 3 and summary["best_robot"] is None and summary["complete"]
+
+
+def test_a_dead_worker_is_recorded_and_the_run_goes_on(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(evolution_module, "evaluate", dies_on_birth_3)
+    run = make_evolution(tmp_path, population=3, budget=7, executor=LocalExecutor(workers=1))
+    summary = run.run()
+    history = read_history(tmp_path)
+    assert sorted(history["birth"]) == list(range(7))
+    failed = history[history["error"] != ""]
+    assert list(failed["birth"]) == [3], "only the evaluation that killed its worker fails"
+    assert list(failed["error"]) == ["the worker process died"]
+    assert summary["failed"] == 1 and summary["complete"]
+    check_steady_state(tmp_path, 3, 7, seed=3)
+
+
+# ---- resume after a crash at any point -----------------------------------------------------
+
+
+def crash_on_call(k: int, fn: Callable[..., Any], after: bool = False) -> Callable[..., Any]:
+    """``fn`` that crashes on its k-th call (before it runs, or after with ``after``)."""
+    calls = 0
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls == k and not after:
+            raise Crash(f"crash before call {k} of {fn.__name__}")
+        result = fn(*args, **kwargs)
+        if calls == k:
+            raise Crash(f"crash after call {k} of {fn.__name__}")
+        return result
+
+    return wrapper
+
+
+def crash_on_state_write(k: int, torn: bool = False) -> Callable[..., Any]:
+    """write_json that crashes on the k-th state.json: right after writing it, or with
+    ``torn`` halfway through, leaving half of it in its temporary file."""
+    real = evolution_module.write_json
+    calls = 0
+
+    def write_json(path: Path, data: dict[str, Any]) -> Path:
+        nonlocal calls
+        if path.name != "state.json":
+            return real(path, data)
+        calls += 1
+        if calls == k and torn:
+            text = json.dumps(data)
+            path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
+            raise Crash("crash while writing the state")
+        real(path, data)
+        if calls == k:
+            raise Crash("crash after writing the state")
+        return path
+
+    return write_json
+
+
+BUDGET = 10
+POPULATION = 4
+# A run of BUDGET robots writes state.json once per submission and once per result.
+STATE_WRITES = 2 * BUDGET
+CRASHES: dict[str, Callable[[int], Any]] = {
+    "during-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate)),
+    "after-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate, after=True)),
+    "writing-robot-file": lambda k: (
+        "save_robot",
+        crash_on_call(k, evolution_module.save_robot, after=True),
+    ),
+    "writing-state": lambda k: ("write_json", crash_on_state_write(2 * k, torn=True)),
+    "after-state": lambda k: ("write_json", crash_on_state_write(2 * k)),
+    "after-submit-state": lambda k: ("write_json", crash_on_state_write(2 * k - 1)),
+}
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    run_dir = tmp_path_factory.mktemp("uninterrupted")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(evolution_module, "evaluate", fake_evaluate)
+        make_evolution(run_dir, population=POPULATION, budget=BUDGET).run()
+    return run_dir
+
+
+def same_run_files(a: Path, b: Path) -> None:
+    pd.testing.assert_frame_equal(comparable(read_history(a)), comparable(read_history(b)))
+    for name in ("population.json",):
+        assert json.loads((a / name).read_text()) == json.loads((b / name).read_text())
+    assert sorted(p.name for p in (a / "robots").iterdir()) == sorted(
+        p.name for p in (b / "robots").iterdir()
+    )
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    for key in ("wall_seconds", "steps_per_second"):
+        sa.pop(key), sb.pop(key)
+    assert sa == sb
+
+
+@pytest.mark.parametrize("k", [1, POPULATION, POPULATION + 1, BUDGET])
+@pytest.mark.parametrize("where", CRASHES)
+def test_resume_after_a_crash_gives_the_uninterrupted_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path, where: str, k: int
+) -> None:
+    name, patched = CRASHES[where](k)
+    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
+    monkeypatch.setattr(evolution_module, name, patched)
+    with pytest.raises(Crash):
+        make_evolution(tmp_path, population=POPULATION, budget=BUDGET).run()
+    monkeypatch.undo()
+    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
+    # As evo/main.py does: resume when a state was saved, else start again.
+    if (tmp_path / "state.json").exists():
+        resumed = make_evolution(tmp_path, population=POPULATION, budget=BUDGET, seed=99)
+        resumed.resume()  # the seed comes from the saved state, not the constructor
+    else:
+        resumed = make_evolution(tmp_path, population=POPULATION, budget=BUDGET)
+    resumed.run()
+    same_run_files(uninterrupted, tmp_path)
+    assert not list(tmp_path.glob("*.tmp")), "a temporary file outlived the run"
+
+
+def test_resume_of_a_finished_run_evaluates_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path
+) -> None:
+    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
+    make_evolution(tmp_path, population=POPULATION, budget=BUDGET).run()
+    monkeypatch.setattr(evolution_module, "evaluate", crash_on_call(1, fake_evaluate))
+    again = make_evolution(tmp_path, population=POPULATION, budget=BUDGET)
+    again.resume()
+    assert again.run()["complete"]
+    same_run_files(uninterrupted, tmp_path)
+
+
+def test_resume_refuses_a_directory_without_a_readable_state(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no saved state"):
+        make_evolution(tmp_path).resume()
+    (tmp_path / "state.json").write_text('{"version": 1, "seed": 0')
+    with pytest.raises(ValueError, match="unreadable run state"):
+        make_evolution(tmp_path).resume()
+
+
+# ---- python evo/main.py end to end ---------------------------------------------------------
+
+TINY = [
+    "+exp=smoke",
+    "ga.population_size=3",
+    "ga.robot_budget=6",
+    "ga.schedule.initial=256",
+    "ga.schedule.first=256",
+    "ga.schedule.last=768",
+    "learner.num_envs=4",
+    "learner.rollout_steps=64",
+    "learner.epochs=1",
+    "learner.minibatch_size=128",
+    "learner.hidden=[32,32]",
+    "env.task.t_max=40",
+]
+"""A real but tiny evolution: 6 robots of a few hundred env steps each."""
+
+ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "COLUMNS": "120"}
+
+# Runs evo/main.py in this process after arranging a SIGKILL at one point of the run.
+DRIVER = r"""
+import json, os, runpy, signal, sys
+import evo.evaluation as evaluation
+import evo.evolution as evolution
+
+main_file, point, k, argv = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
+calls = 0
+
+
+def hit():
+    global calls
+    calls += 1
+    return calls == k
+
+
+def die():
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+real_write, real_save = evolution.write_json, evaluation.save_checkpoint
+
+
+def write_json(path, data):
+    if path.name == "state.json" and point == "writing-state" and hit():
+        text = json.dumps(data)
+        path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
+        die()
+    real_write(path, data)
+    if path.name == "state.json" and point == "after-final-state":
+        if not data["pending"] and len(data["history"]) == k:
+            die()
+    return path
+
+
+def save_checkpoint(*args, **kwargs):
+    if point == "evaluating" and hit():
+        die()
+    return real_save(*args, **kwargs)
+
+
+evolution.write_json, evaluation.save_checkpoint = write_json, save_checkpoint
+sys.argv = [main_file, *argv]
+runpy.run_path(main_file, run_name="__main__")
+"""
+
+
+def main_cmd(*args: str) -> list[str]:
+    return [sys.executable, str(REPO / "evo" / "main.py"), *args]
+
+
+def run(cmd: list[str], cwd: Path, timeout: float = 240) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(cmd, cwd=cwd, env=ENV, capture_output=True, text=True, timeout=timeout)
+
+
+def killed(point: str, k: int, *args: str, cwd: Path) -> None:
+    done = run(
+        [sys.executable, "-c", DRIVER, str(REPO / "evo" / "main.py"), point, str(k), *args], cwd
+    )
+    assert done.returncode == -signal.SIGKILL, (point, k, done.returncode, done.stderr[-2000:])
+
+
+def check_run_dir(run_dir: Path, robot_budget: int) -> pd.DataFrame:
+    """Everything a finished run directory must hold."""
+    for name in ("config.yaml", "state.json", "history.csv", "population.json", "summary.json"):
+        assert (run_dir / name).is_file(), f"{name} missing"
+    history = read_history(run_dir)
+    assert sorted(history["birth"]) == list(range(robot_budget)), "births lost or repeated"
+    assert (history["error"] == "").all(), list(history["error"])
+    assert np.isfinite(history["fitness"]).all(), list(history["fitness"])
+    robots = {p.stem for p in (run_dir / "robots").glob("*.json")}
+    assert robots == set(history["name"])
+    for name in history["name"]:
+        robot = load_robot(run_dir / "robots" / f"{name}.json")
+        assert name == robot.name or name.startswith(f"{robot.name}-"), name
+        assert (run_dir / "evals" / f"{name}.pt").is_file(), f"{name}.pt missing"
+        assert (run_dir / "evals" / f"{name}.csv").is_file(), f"{name}.csv missing"
+    state = json.loads((run_dir / "state.json").read_text())
+    assert state["next_birth"] == robot_budget and state["pending"] == []
+    assert json.loads((run_dir / "summary.json").read_text())["complete"]
+    assert not list(run_dir.glob("*.tmp")), "a temporary file outlived the run"
+    return history
+
+
+@pytest.mark.slow
+def test_smoke_experiment_end_to_end(tmp_path: Path) -> None:
+    run_dir, cwd = tmp_path / "run", tmp_path / "cwd"
+    cwd.mkdir()
+    done = run(main_cmd("+exp=smoke", f"hydra.run.dir={run_dir}"), cwd)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = check_run_dir(run_dir, robot_budget=8)
+    assert (history["method"] == "E+L").all()
+    schedule = BudgetSchedule(initial=2048, first=2048, last=4096)
+    for row in history.itertuples():
+        assert row.budget == schedule.budget(row.birth, 4, 8)
+        assert row.env_steps >= row.budget
+    summary = json.loads((run_dir / "summary.json").read_text())
+    best = summary["best_robot"]
+    assert summary["best_fitness"] == pytest.approx(history["fitness"].max())
+    assert f"best robot: {run_dir / 'robots' / best}.json" in done.stdout.replace("\n", "")
+    validate = run(
+        [sys.executable, "-m", "evo.robot", "validate", str(run_dir / "robots" / f"{best}.json")],
+        cwd,
+    )
+    assert validate.returncode == 0, validate.stdout + validate.stderr
+    assert list(cwd.iterdir()) == [], "the run wrote outside its run directory"
+
+
+@pytest.fixture(scope="module")
+def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    run_dir = tmp_path_factory.mktemp("serial") / "run"
+    done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return run_dir
+
+
+@pytest.mark.slow
+def test_sigkilled_serial_run_resumes_to_the_uninterrupted_history(
+    tmp_path: Path, serial_reference: Path
+) -> None:
+    run_dir = tmp_path / "run"
+    start = [*TINY, "executor=serial", f"hydra.run.dir={run_dir}"]
+    # Killed mid-write of the state (after the first result), then during the training
+    # of the second robot after resuming, then just after the final state was saved.
+    killed("writing-state", 3, *start, cwd=tmp_path)
+    assert len(read_history(run_dir)) == 1
+    killed("evaluating", 2, f"resume={run_dir}", cwd=tmp_path)
+    assert len(read_history(run_dir)) == 2
+    (in_flight,) = json.loads((run_dir / "state.json").read_text())["pending"]
+    assert (run_dir / "evals" / f"{in_flight['name']}.csv").is_file()
+    assert not (run_dir / "evals" / f"{in_flight['name']}.pt").exists(), "killed mid-evaluation"
+    killed("after-final-state", 6, f"resume={run_dir}", cwd=tmp_path)
+    assert len(read_history(run_dir)) == 5, "history.csv lags the state by one row"
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = check_run_dir(run_dir, robot_budget=6)
+    pd.testing.assert_frame_equal(comparable(history), comparable(read_history(serial_reference)))
+
+
+def wait_for_rows(path: Path, rows: int, proc: subprocess.Popen[str], timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, "the run ended before it could be killed"
+        if path.is_file() and len(path.read_text().splitlines()) - 1 >= rows:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no {rows} rows in {path} after {timeout} s")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("executor", ["local"])
+def test_sigkilled_run_resumes_with_every_robot_once(tmp_path: Path, executor: str) -> None:
+    # The whole process group (main process and its workers) is killed from outside
+    # while robots are in training, as an out-of-memory killer or a cluster would.
+    run_dir = tmp_path / "run"
+    cmd = main_cmd(*TINY, f"executor={executor}", f"hydra.run.dir={run_dir}")
+    with subprocess.Popen(
+        cmd,
+        cwd=tmp_path,
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    ) as proc:
+        try:
+            wait_for_rows(run_dir / "history.csv", 2, proc, timeout=120)
+            os.killpg(proc.pid, signal.SIGKILL)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    state = json.loads((run_dir / "state.json").read_text())
+    assert len(state["history"]) < 6, "killed too late to test anything"
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    check_run_dir(run_dir, robot_budget=6)
