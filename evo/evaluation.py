@@ -33,6 +33,9 @@ class Job:
     method: str = "E+L"
     record: RecordConfig = field(default_factory=RecordConfig)
     config_yaml: str = ""
+    timeout_s: float = 0.0
+    """Wall-clock limit of one evaluation in seconds, checked after every collector
+    batch (0 = none); an evaluation past it stops with an ``EvaluationTimeout`` error."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +59,10 @@ class Task:
     seed: int
     parents: tuple[str, ...] = ()
     operator: str = "random"
+
+
+class EvaluationTimeout(RuntimeError):
+    """An evaluation ran past ``Job.timeout_s``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,14 +126,14 @@ def evaluate(task: Task, job: Job) -> Outcome:
     start = time.perf_counter()
     try:
         robot = parse_robot(json.loads(task.robot), source=task.name)
-        outcome = _train_and_record(robot, task, job)
+        outcome = _train_and_record(robot, task, job, start)
     except Exception:  # noqa: BLE001 - any failure is recorded and the run goes on
         return Outcome(task.birth, task.name, wall_seconds=time.perf_counter() - start,
                        error=traceback.format_exc(limit=8))
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 
-def _train_and_record(robot: Robot, task: Task, job: Job) -> Outcome:
+def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outcome:
     evals = Path(job.run_dir) / "evals"
     evals.mkdir(parents=True, exist_ok=True)
     model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
@@ -136,10 +143,20 @@ def _train_and_record(robot: Robot, task: Task, job: Job) -> Outcome:
         "parents": list(task.parents), "replay_seed": task.seed,
     }
     with open_recorder(job.record, evals, task.name, model, metadata) as recorder:
+
+        def on_curve(row: dict[str, float]) -> None:
+            recorder.curve(row)
+            elapsed = time.perf_counter() - start
+            if job.timeout_s > 0 and elapsed > job.timeout_s:
+                raise EvaluationTimeout(
+                    f"{task.name}: timed out after {elapsed:.1f} s at {row['env_steps']:.0f} "
+                    f"of {task.budget} env steps (ga.eval_timeout_s = {job.timeout_s:g})"
+                )
+
         sampler = EpisodeSampler(recorder, job.record)
         result = get_learner(job.learner)(
             robot, physics=job.physics, env=job.env, config=job.learner, budget=task.budget,
-            seed=task.seed, on_curve=recorder.curve,
+            seed=task.seed, on_curve=on_curve,
             on_episode=sampler if job.record.enabled else None,
         )
         sampler.finish()

@@ -138,6 +138,7 @@ GA_KEYS = frozenset(
         "parent_tries",
         "mutation_rate",
         "mutation_operators",
+        "eval_timeout_s",
     }
 )
 """Every key of the ``ga`` group (conf/ga/steady_state.yaml)."""
@@ -192,6 +193,13 @@ class EvolveParts:
     executor: EvalExecutor
 
 
+def _timeout(value: Any) -> float:
+    """``ga.eval_timeout_s`` as seconds (0 = no limit)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
+        raise ConfigError(f"ga.eval_timeout_s: expected seconds >= 0 (0 = none), got {value!r}")
+    return float(value)
+
+
 def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     """Build and check everything ``task=evolve`` needs, before anything runs.
 
@@ -204,7 +212,8 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     method = method_label(strategy.code, learner.update)
     job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method,
               record=typed(RecordConfig, cfg.record, "record"),
-              config_yaml=OmegaConf.to_yaml(cfg, resolve=True))
+              config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
+              timeout_s=_timeout(cfg.ga.get("eval_timeout_s", 0)))
     replacement = instantiate(cfg.ga.replacement, "ga.replacement")
     if not isinstance(replacement, ReplaceWorst):
         raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")

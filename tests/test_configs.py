@@ -215,6 +215,7 @@ BAD_VALUES = [
     ("ga.mutation_rate=2", "ga: mutation_rate must be in [0, 1]"),
     ("ga.mutation_operators=[teleport]", "ga: unknown mutation operators ['teleport']"),
     ("ga.crossover_tries=many", "ga.crossover_tries: expected an integer, got 'many'"),
+    ("ga.eval_timeout_s=-1", "ga.eval_timeout_s: expected seconds >= 0 (0 = none), got -1"),
     ("executor.workers=-1", "executor: need workers >= 0"),
     ("+executor.colour=red", "executor: unknown key(s) colour"),
     ("learner.update=maybe", "learner.update: expected true or false, got 'maybe'"),

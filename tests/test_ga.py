@@ -8,6 +8,7 @@ distribution, so it can fail.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -34,6 +35,7 @@ from evo.components.ga import (
 from evo.envs.task import EnvConfig
 from evo.evaluation import Job, Outcome, Task, evaluate
 from evo.learners.common import LearnerConfig
+from evo.record.readback import read_curve
 from evo.robot import GeneratorParams, Limits, Robot, parse_robot, random_robot
 from evo.robot.builder import PhysicsParams
 
@@ -412,6 +414,18 @@ def tiny_tasks() -> list[Task]:
 
 
 BROKEN = Task(0, "broken", json.dumps({"format": "evo.robot/1", "root": {"type": "motor"}}), 256, 1)
+
+
+def test_an_evaluation_past_its_time_limit_is_an_error_outcome(tmp_path: Path) -> None:
+    (task,) = tiny_tasks()
+    job = dataclasses.replace(tiny_job(tmp_path), timeout_s=1e-6)
+    outcome = evaluate(dataclasses.replace(task, budget=10 * 128), job)
+    assert outcome.error and "EvaluationTimeout" in outcome.error, outcome.error
+    assert "timed out after" in outcome.error and "ga.eval_timeout_s" in outcome.error
+    assert math.isnan(outcome.fitness)
+    # Stopped after its first batch, and the recording of that batch was kept.
+    curve = read_curve(tmp_path / "evals" / f"{task.name}.mcap")
+    assert curve["env_steps"].tolist() == [128.0]
 
 
 def test_an_unsimulatable_robot_is_an_error_outcome(tmp_path: Path) -> None:

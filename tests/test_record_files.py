@@ -3,6 +3,7 @@ entities, crash safety of a killed writer, and the run-level files."""
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -11,11 +12,13 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
 import pandas as pd
 import pytest
+from mcap.reader import make_reader
 from test_record import curve_rows, robot_bodies, scene, simulate  # tests/ is on sys.path
 
 from evo.record import (
@@ -30,6 +33,7 @@ from evo.record import (
     read_births,
     read_curve,
     read_episodes,
+    read_json_topic,
     read_metadata,
     write_replay_rrd,
 )
@@ -81,6 +85,56 @@ def test_files_pass_the_rerun_checks(tmp_path: Path) -> None:
         assert re.search(rf"ok\s+\d+\s+\d+\s+{re.escape(topic)}\s", check.stdout), topic
     verify = cli("rrd", "verify", rrd)
     assert verify.returncode == 0, verify.stdout + verify.stderr
+
+
+def layout_paths(name: str) -> tuple[set[str], list[str]]:
+    """The 3D topics and the plotted message paths of ``docs/foxglove/<name>.json``."""
+    layout = json.loads((ROOT / "docs" / "foxglove" / f"{name}.json").read_text())
+    topics: set[str] = set()
+    paths: list[str] = []
+    for panel, config in layout["configById"].items():
+        if panel.startswith("3D!"):
+            topics |= set(config["topics"])
+        elif panel.startswith("Plot!"):
+            paths += [p["value"] for p in config["paths"]]
+            if "xAxisPath" in config:
+                paths.append(config["xAxisPath"]["value"])
+    return topics, paths
+
+
+def has_number(message: Any, keys: list[str]) -> bool:
+    """Whether ``message[k1][k2]...`` is a number."""
+    for key in keys:
+        if not isinstance(message, dict) or key not in message:
+            return False
+        message = message[key]
+    return isinstance(message, int | float) and not isinstance(message, bool)
+
+
+def check_layout(name: str, mcap: Path) -> None:
+    """Every topic and message path the Foxglove layout shows is in the recording."""
+    with mcap.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    channels = {c.topic for c in summary.channels.values()}
+    topics, paths = layout_paths(name)
+    assert topics <= channels, f"{name}: topics not recorded: {sorted(topics - channels)}"
+    for path in paths:
+        topic, _, fields = path.partition(".")
+        messages = read_json_topic(mcap, topic)
+        assert messages, f"{name}: nothing recorded on {topic}"
+        assert any(has_number(m, fields.split(".")) for m in messages), f"{name}: no {path}"
+
+
+def test_foxglove_layouts_show_what_is_recorded(tmp_path: Path) -> None:
+    mcap, _ = record_evaluation(tmp_path, scene(n_rocks=1))
+    check_layout("evaluation", mcap)
+    with RunRecorder(tmp_path, {"seed": 0}) as run:
+        run.birth(Birth(0, "robot-0", 0.5, True, 0.5, 0.5))
+        run.robot("four_wheeler", build(load_robot(ROOT / "robots/four_wheeler.json")).compile(),
+                  fitness=0.5)
+        run.close({})
+    check_layout("run", tmp_path / "run.mcap")
 
 
 def test_rrd_holds_the_scene_curves_and_a_blueprint(tmp_path: Path) -> None:
