@@ -107,7 +107,7 @@ def main() -> None:
                     table.add_row(*row)
                     print(*row, flush=True)  # progress; the table comes at the end
                     env.close()
-    Console().print(table)
+    Console(width=200).print(table)
 
 
 if __name__ == "__main__":

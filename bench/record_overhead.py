@@ -58,7 +58,7 @@ def main() -> None:
         table.add_column(column, justify="right")
     table.add_row("off", f"{rates['off']:,.0f}", "")
     table.add_row("on", f"{rates['on']:,.0f}", f"{1 - rates['on'] / rates['off']:.1%}")
-    console = Console()
+    console = Console(width=200)
     console.print(table)
     for suffix, size in sizes.items():
         console.print(f"evals/<name>{suffix}: {size / 1e3:,.0f} kB")

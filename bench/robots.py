@@ -160,7 +160,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.count < 2:
         parser.error("--count must be at least 2 (crossover needs pairs)")
-    console = Console()
+    console = Console(width=200)
     rng = np.random.default_rng(args.seed)
     gen = generate(args.count, rng)
     console.print(generation_table(gen))

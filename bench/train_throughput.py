@@ -86,8 +86,8 @@ def main() -> None:
                               seed=args.seed + 1)
                 row.append(f"{ev['success_rate']:.0%}")
             table.add_row(*row)
-            print(f"{Path(path).stem} {arena}: {result.steps_per_second:,.0f} steps/s", flush=True)
-    Console().print(table)
+            print(" | ".join(f"{c}: {v}" for c, v in zip(columns, row, strict=True)), flush=True)
+    Console(width=200).print(table)
 
 
 if __name__ == "__main__":
