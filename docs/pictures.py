@@ -1,9 +1,12 @@
 """Make the README's pictures with the project's own code.
 
-    MUJOCO_GL=egl python docs/pictures.py [--curve <run dir of +exp=train>]
+    MUJOCO_GL=egl python docs/pictures.py [--curve <train run>] [--run <evolution run>]
 
 Writes ``docs/robots.png`` (the example robots), ``docs/arena.png`` (the cluttered
-arena with the four-wheeler) and, given a training run, ``docs/curve.png``.
+arena with the four-wheeler), given a training run (``+exp=train``) ``docs/curve.png``,
+and given an evolution run ``docs/evolution.png`` (every robot's fitness in birth order
+with the population's best and mean), ``docs/best_curves.png`` (learning curves of the
+best robots) and ``docs/best.png`` (the best robots).
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from analysis import plots
+from analysis.load import load_runs
 from evo.envs.gym_env import ReachGymEnv
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -27,6 +32,7 @@ HERE = Path(__file__).parent
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--curve", type=Path, help="run directory of python evo/main.py +exp=train")
+    parser.add_argument("--run", type=Path, help="run directory of an evolution")
     args = parser.parse_args()
     robots = [load_robot(p) for p in sorted(glob.glob("robots/*.json"))]
     print(contact_sheet(robots, PhysicsParams(), HERE / "robots.png"))
@@ -48,6 +54,21 @@ def main() -> None:
         fig.tight_layout()
         fig.savefig(HERE / "curve.png", dpi=110)
         print(HERE / "curve.png")
+    if args.run is not None:
+        evolution_pictures(args.run)
+
+
+def evolution_pictures(run_dir: Path, top: int = 4) -> None:
+    """``docs/evolution.png``, ``docs/best_curves.png`` and ``docs/best.png`` of a run."""
+    runs = load_runs(run_dir)
+    size = int(runs.runs["population_size"].iloc[0])
+    plots.plot_evolution(runs.robots, population_size=size, path=HERE / "evolution.png")
+    best = runs.robots.dropna(subset=["fitness"]).nlargest(top, "fitness")
+    plots.plot_learning_curves(runs.curves, list(best["name"]), window=3,
+                               path=HERE / "best_curves.png")
+    chosen = [load_robot(run_dir / "robots" / f"{name}.json") for name in best["name"]]
+    print(contact_sheet(chosen, PhysicsParams(), HERE / "best.png"))
+    print(HERE / "evolution.png", HERE / "best_curves.png")
 
 
 if __name__ == "__main__":
