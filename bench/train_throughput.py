@@ -12,7 +12,8 @@ and prints, from the same run:
   skip (``bench/env_throughput.py``'s ``raw_rate``) and the ratio.
 
 With ``--quality`` it also evaluates the trained policy deterministically (20 episodes)
-and prints the success rate: use ``--steps 150000`` for the learning-quality figures.
+and prints the success rate: use ``--steps 150000`` for the learning-quality figures;
+``--curves DIR`` keeps every run's learning curve (CSV) and draws them (``curves.png``).
 
 Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots ...]``
 """
@@ -24,7 +25,9 @@ import dataclasses
 import glob
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import torch
 from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
 from rich.console import Console
@@ -48,6 +51,8 @@ def main() -> None:
     parser.add_argument("--num-envs", type=int, default=None, help="override learner.num_envs")
     parser.add_argument("--quality", action="store_true", help="also evaluate success rate")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--curves", type=Path, default=None,
+                        help="folder for every run's learning curve (CSV) and curves.png")
     args = parser.parse_args()
     torch.set_num_threads(1)
     config = LearnerConfig()
@@ -86,8 +91,29 @@ def main() -> None:
                               seed=args.seed + 1)
                 row.append(f"{ev['success_rate']:.0%}")
             table.add_row(*row)
+            if args.curves is not None:
+                args.curves.mkdir(parents=True, exist_ok=True)
+                result.curve.to_csv(args.curves / f"{Path(path).stem}-{arena}.csv", index=False)
             print(" | ".join(f"{c}: {v}" for c, v in zip(columns, row, strict=True)), flush=True)
     Console(width=200).print(table)
+    if args.curves is not None:
+        print(plot_curves(args.curves))
+
+
+def plot_curves(folder: Path) -> Path:
+    """``folder/curves.png``: success rate and mean return against env steps, every run."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8))
+    for path in sorted(folder.glob("*.csv")):
+        curve = pd.read_csv(path)
+        style = "-" if path.stem.endswith("-clean") else "--"
+        for ax, column in ((left, "success_rate"), (right, "mean_return")):
+            ax.plot(curve["env_steps"], curve[column].interpolate(), style, label=path.stem)
+    left.set(xlabel="env steps", ylabel="success rate (finished episodes)")
+    right.set(xlabel="env steps", ylabel="mean return (finished episodes)")
+    right.legend(fontsize="small", loc="lower right")
+    fig.tight_layout()
+    fig.savefig(folder / "curves.png", dpi=110)
+    return folder / "curves.png"
 
 
 if __name__ == "__main__":
