@@ -81,10 +81,12 @@ class GAConfig:
     Attributes:
         population_size: Robots in the population (the initial ones are random).
         robot_budget: Robots evaluated in all, initial ones included.
+        eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
     """
 
     population_size: int = 20
     robot_budget: int = 100
+    eval_timeout_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.population_size < 2:
@@ -94,6 +96,8 @@ class GAConfig:
                 f"robot_budget ({self.robot_budget}) must be >= population_size "
                 f"({self.population_size})"
             )
+        if self.eval_timeout_s < 0:
+            raise ValueError(f"eval_timeout_s must be >= 0 (0 = none), got {self.eval_timeout_s}")
 
 
 def evaluation_seed(seed: int, birth: int) -> int:

@@ -193,13 +193,6 @@ class EvolveParts:
     executor: EvalExecutor
 
 
-def _timeout(value: Any) -> float:
-    """``ga.eval_timeout_s`` as seconds (0 = no limit)."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
-        raise ConfigError(f"ga.eval_timeout_s: expected seconds >= 0 (0 = none), got {value!r}")
-    return float(value)
-
-
 def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     """Build and check everything ``task=evolve`` needs, before anything runs.
 
@@ -208,12 +201,13 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     """
     learner = typed(LearnerConfig, cfg.learner, "learner")
     strategy = _strategy(cfg)
-    ga = typed(GAConfig, {k: cfg.ga[k] for k in ("population_size", "robot_budget")}, "ga")
+    sizes = ("population_size", "robot_budget", "eval_timeout_s")
+    ga = typed(GAConfig, {k: cfg.ga[k] for k in sizes if k in cfg.ga}, "ga")
     method = method_label(strategy.code, learner.update)
     job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method,
               record=typed(RecordConfig, cfg.record, "record"),
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-              timeout_s=_timeout(cfg.ga.get("eval_timeout_s", 0)))
+              timeout_s=ga.eval_timeout_s)
     replacement = instantiate(cfg.ga.replacement, "ga.replacement")
     if not isinstance(replacement, ReplaceWorst):
         raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")

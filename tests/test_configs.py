@@ -162,7 +162,7 @@ def test_smoke_and_demo_are_small_evolutions(hydra_conf: None, tmp_path: Path) -
     assert smoke.ga.robot_budget <= 10 and smoke.schedule.budget(7, 4, 8) <= 5_000
     demo = parts_of("demo", tmp_path)
     size, total = demo.ga.population_size, demo.ga.robot_budget
-    assert 4 <= size and total >= 2 * size, "the demo breeds at least as many as it draws"
+    assert size >= 4 and total >= 2 * size, "the demo breeds at least as many as it draws"
     budgets = [demo.schedule.budget(b, size, total) for b in range(total)]
     assert min(budgets) >= 20_000 and max(budgets) <= 150_000 and budgets == sorted(budgets)
     # About ten minutes on 2 cores at the ~4,000 env steps/s two workers reach.
@@ -218,7 +218,8 @@ BAD_VALUES = [
     ("ga.mutation_rate=2", "ga: mutation_rate must be in [0, 1]"),
     ("ga.mutation_operators=[teleport]", "ga: unknown mutation operators ['teleport']"),
     ("ga.crossover_tries=many", "ga.crossover_tries: expected an integer, got 'many'"),
-    ("ga.eval_timeout_s=-1", "ga.eval_timeout_s: expected seconds >= 0 (0 = none), got -1"),
+    ("ga.eval_timeout_s=-1", "ga: eval_timeout_s must be >= 0 (0 = none), got -1"),
+    ("ga.eval_timeout_s=soon", "ga.eval_timeout_s: expected a number, got 'soon'"),
     ("executor.workers=-1", "executor: need workers >= 0"),
     ("+executor.colour=red", "executor: unknown key(s) colour"),
     ("learner.update=maybe", "learner.update: expected true or false, got 'maybe'"),
