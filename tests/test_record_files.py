@@ -119,11 +119,11 @@ def check_layout(name: str, mcap: Path) -> None:
     channels = {c.topic for c in summary.channels.values()}
     topics, paths = layout_paths(name)
     assert topics <= channels, f"{name}: topics not recorded: {sorted(topics - channels)}"
+    messages = {topic: read_json_topic(mcap, topic) for topic in {p.split(".")[0] for p in paths}}
     for path in paths:
         topic, _, fields = path.partition(".")
-        messages = read_json_topic(mcap, topic)
-        assert messages, f"{name}: nothing recorded on {topic}"
-        assert any(has_number(m, fields.split(".")) for m in messages), f"{name}: no {path}"
+        assert messages[topic], f"{name}: nothing recorded on {topic}"
+        assert any(has_number(m, fields.split(".")) for m in messages[topic]), f"{name}: no {path}"
 
 
 def test_foxglove_layouts_show_what_is_recorded(tmp_path: Path) -> None:
