@@ -1,8 +1,9 @@
 """End-to-end PPO throughput, with its time split, against the raw physics rate.
 
-For every example robot and arena this trains PPO with the default learner config
-(``conf/learner/ppo.yaml``) for ``--steps`` env steps on ``--nthread`` physics threads
-and prints, from the same run:
+For every example robot and arena this trains PPO with the learner of one-robot
+training (``+exp=train``: ``conf/learner/ppo.yaml`` with ``conf/exp/train.yaml``'s
+overrides, and any Hydra overrides given on the command line) for ``--steps`` env steps
+on ``--nthread`` physics threads and prints, from the same run:
 
 * env steps/s end to end (collection + GAE + update + curve bookkeeping);
 * the split of wall time: physics (inside ``mujoco.rollout``), env (the rest of the
@@ -15,13 +16,13 @@ With ``--quality`` it also evaluates the trained policy deterministically (20 ep
 and prints the success rate: use ``--steps 150000`` for the learning-quality figures;
 ``--curves DIR`` keeps every run's learning curve (CSV) and draws them (``curves.png``).
 
-Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots ...]``
+Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots ...]
+[learner.num_envs=32 learner.rollout_steps=64 ...]``
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import glob
 from pathlib import Path
 
@@ -30,9 +31,11 @@ import numpy as np
 import pandas as pd
 import torch
 from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
+from hydra import compose, initialize_config_dir
 from rich.console import Console
 from rich.table import Table
 
+from evo.config import typed
 from evo.envs.gym_env import arena_params
 from evo.envs.reach import make_env
 from evo.envs.task import EnvConfig
@@ -48,18 +51,18 @@ def main() -> None:
     parser.add_argument("--robots", nargs="+", default=sorted(glob.glob("robots/*.json")))
     parser.add_argument("--arenas", nargs="+", default=["clean", "cluttered"])
     parser.add_argument("--nthread", type=int, default=2, help="physics threads")
-    parser.add_argument("--num-envs", type=int, default=None, help="override learner.num_envs")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. learner.num_envs=32")
     parser.add_argument("--quality", action="store_true", help="also evaluate success rate")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--curves", type=Path, default=None,
                         help="folder for every run's learning curve (CSV) and curves.png")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    config = LearnerConfig()
-    if args.num_envs:
-        config = dataclasses.replace(config, num_envs=args.num_envs)
+    config = train_learner(args.overrides)
+    print(config)
     physics = PhysicsParams()
-    table = Table(title=f"PPO end to end, {args.steps:,} env steps, {config.num_envs} arenas, "
+    table = Table(title=f"PPO end to end, {args.steps:,} env steps, {config.num_envs} arenas x "
+                  f"{config.rollout_steps} steps, minibatch {config.minibatch_size}, "
                   f"{args.nthread} physics threads")
     columns = ["robot", "arena", "steps/s", "physics", "env", "policy+collector", "update",
                "raw physics", "ratio", "fitness"]
@@ -98,6 +101,14 @@ def main() -> None:
     Console(width=200).print(table)
     if args.curves is not None:
         print(plot_curves(args.curves))
+
+
+def train_learner(overrides: list[str]) -> LearnerConfig:
+    """The learner ``python evo/main.py +exp=train`` trains with (plus ``overrides``)."""
+    conf = Path(__file__).resolve().parents[1] / "conf"
+    with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
+        cfg = compose("config", overrides=["+exp=train", *overrides])
+    return typed(LearnerConfig, cfg.learner, "learner")
 
 
 def plot_curves(folder: Path) -> Path:

@@ -16,6 +16,7 @@ Tasks (``task=``):
 from __future__ import annotations
 
 import sys
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -93,14 +94,10 @@ def run_train(cfg: DictConfig, out: Path) -> None:
     """Train one robot and evaluate it (``+exp=train``)."""
     from evo.learners.session import train_robot
 
-    train_robot(
-        _robot(cfg),
-        physics=_physics(cfg),
-        env=typed(EnvConfig, cfg.env, "env"),
-        learner=typed(LearnerConfig, cfg.learner, "learner"),
-        seed=int(cfg.seed),
-        out=out,
-    )
+    env, learner = typed(EnvConfig, cfg.env, "env"), typed(LearnerConfig, cfg.learner, "learner")
+    warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, env)
+    train_robot(_robot(cfg), physics=_physics(cfg), env=env, learner=learner,
+                seed=int(cfg.seed), out=out)
 
 
 def run_evaluate(cfg: DictConfig, out: Path) -> None:
@@ -214,8 +211,28 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     schedule = instantiate(cfg.ga.schedule, "ga.schedule")
     if not isinstance(schedule, BudgetSchedule):
         raise ConfigError(f"ga.schedule: expected a BudgetSchedule, got {type(schedule)}")
+    smallest = min(schedule.budget(b, ga.population_size, ga.robot_budget)
+                   for b in range(ga.robot_budget))
+    warn_if_failures_cannot_end(smallest, "ga.schedule", learner, job.env)
     executor = instantiate(cfg.executor, "executor")  # last: Ray starts here
     return EvolveParts(ga, strategy, replacement, schedule, job, executor)
+
+
+def warn_if_failures_cannot_end(
+    budget: int, budget_key: str, learner: LearnerConfig, env: EnvConfig
+) -> None:
+    """Warn when ``budget`` gives each arena fewer control steps than an episode's limit:
+    then only successful episodes end, and fitness (the mean return of the episodes that
+    ended) would count successes alone."""
+    per_arena = budget // learner.num_envs
+    if per_arena < env.task.t_max:
+        warnings.warn(
+            f"{budget_key}: {budget:,} env steps over learner.num_envs={learner.num_envs} "
+            f"arenas is {per_arena} control steps per arena, under the episode limit "
+            f"env.task.t_max={env.task.t_max}: episodes that fail never end, so fitness "
+            "counts mostly successes. Use fewer arenas or a larger budget.",
+            stacklevel=2,
+        )
 
 
 def run_evolve(cfg: DictConfig, out: Path) -> None:

@@ -14,6 +14,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -35,6 +36,7 @@ from evo.main import (
     _resume_in_place,
     _write_config,
     evolve_parts,
+    warn_if_failures_cannot_end,
 )
 
 REPO = Path(__file__).resolve().parents[1]
@@ -169,6 +171,32 @@ def test_smoke_and_demo_are_small_evolutions(hydra_conf: None, tmp_path: Path) -
     assert sum(budgets) <= 3_000_000, sum(budgets)
     assert demo.job.env.name == "clean" and demo.job.learner.num_envs == 32
     assert demo.job.method == "E+L"
+
+
+@pytest.mark.parametrize("experiment", ["smoke", "demo", "paper_clean", "ablation_smoke"])
+def test_experiments_give_every_arena_room_for_a_failed_episode(
+    hydra_conf: None, tmp_path: Path, experiment: str
+) -> None:
+    """Fitness averages the episodes that ended: each arena must be able to end one by
+    the time limit, or only successes would count (a warning names the keys)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parts_of(experiment, tmp_path)
+    with pytest.warns(UserWarning, match=r"learner.num_envs=256 .* env.task.t_max=") as caught:
+        parts_of(experiment, tmp_path, "learner.num_envs=256", "env.task.t_max=1000")
+    assert "ga.schedule" in str(caught[0].message)
+
+
+def test_one_robot_training_leaves_room_for_failed_episodes(hydra_conf: None) -> None:
+    cfg = compose("config", overrides=["+exp=train"])
+    learner = typed(LearnerConfig, cfg.learner, "learner")
+    env = typed(EnvConfig, cfg.env, "env")
+    assert learner.num_envs * learner.rollout_steps == 2048 and learner.update
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, env)
+    with pytest.warns(UserWarning, match=r"learner.total_steps: 100,000 env steps .* 781 "):
+        warn_if_failures_cannot_end(100_000, "learner.total_steps", learner, env)
 
 
 @pytest.mark.parametrize("experiment", ["ablation", "ablation_smoke"])

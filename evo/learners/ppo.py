@@ -160,7 +160,7 @@ def _train(
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     collector = Collector(
         env, policy.actor, frames_per_batch=config.frames_per_batch, total_frames=frames,
-        auto_register_policy_transforms=False,
+        auto_register_policy_transforms=False, track_traj_ids=False,
     )
     rows: list[dict[str, float]] = []
     returns_sum, returns_count, steps = 0.0, 0, 0
