@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -177,7 +178,8 @@ def _train(
             row = {"env_steps": float(steps), **_episode_stats(episodes)}
             for term in REWARD_TERMS:
                 row[f"reward/{term}"] = float(batch["next", "reward_terms", term].mean())
-            row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
+            with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
+                row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             if on_curve is not None:
@@ -199,6 +201,17 @@ def _train(
         unstable=env.core.unstable_count,
         timing=timing,
     )
+
+
+@contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Let torch use ``n`` intra-op threads inside the block (as many as it had, at least)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(max(n, before))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def _learn(
