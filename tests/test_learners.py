@@ -168,3 +168,22 @@ def test_train_and_evaluate_from_the_command_line(tmp_path: Path) -> None:
                     f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "none.pt" in done.stderr
+
+
+def test_collector_sampler_draws_from_the_actor_distribution_with_its_log_prob() -> None:
+    from tensordict import TensorDict
+
+    policy = make_policy(6, 3, LearnerConfig(init_log_std=-0.7))
+    policy.norm.update(torch.randn(50, 6) * 3 + 1)
+    observation = torch.randn(4, 6).repeat(5000, 1)
+    with torch.no_grad():
+        out = policy.sampler()(TensorDict({"observation": observation}, batch_size=[20000]))
+        dist = policy.actor.get_dist(TensorDict({"observation": observation}, batch_size=[20000]))
+        expected = dist.log_prob(out["action"])
+    torch.testing.assert_close(out["action_log_prob"], expected, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(out["loc"], dist.base_dist.loc)
+    # The draws follow the actor's Gaussian: per observation, mean loc and std exp(-0.7).
+    actions = out["action"].reshape(5000, 4, 3)
+    torch.testing.assert_close(actions.mean(0), out["loc"][:4], atol=0.03, rtol=0)
+    torch.testing.assert_close(actions.std(0), torch.full((4, 3), np.exp(-0.7)), atol=0.02,
+                               rtol=0)

@@ -157,6 +157,25 @@ class GaussianHead(nn.Module):
         return loc, self.log_std.exp().expand_as(loc)
 
 
+class GaussianSampler(nn.Module):
+    """The actor's random action and its log-probability in one call: what a collector
+    needs, without building a distribution object and its TensorDicts every step (the
+    loss still reads the policy through the ``ProbabilisticActor``)."""
+
+    def __init__(self, head: GaussianHead) -> None:
+        super().__init__()
+        self.head = head
+
+    def forward(
+        self, observation: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        loc, scale = self.head(observation)
+        noise = torch.randn_like(loc)
+        action = loc + scale * noise
+        log_prob = (-0.5 * noise**2 - scale.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
+        return loc, scale, action, log_prob
+
+
 class ValueHead(nn.Module):
     """State value from an MLP of the normalised observation."""
 
@@ -184,6 +203,14 @@ class Policy:
         loc, _ = self.actor.module[0].module(observation)
         action: torch.Tensor = loc
         return action
+
+    def sampler(self) -> TensorDictModule:
+        """The exploring actor for collectors (``GaussianSampler``; shares the weights)."""
+        return TensorDictModule(
+            GaussianSampler(self.actor.module[0].module),
+            in_keys=["observation"],
+            out_keys=["loc", "scale", "action", "action_log_prob"],
+        )
 
     def state_dict(self) -> dict[str, Any]:
         """Everything a checkpoint needs (tensors and plain numbers only)."""

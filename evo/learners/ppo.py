@@ -160,7 +160,7 @@ def _train(
     optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     collector = Collector(
-        env, policy.actor, frames_per_batch=config.frames_per_batch, total_frames=frames,
+        env, policy.sampler(), frames_per_batch=config.frames_per_batch, total_frames=frames,
         auto_register_policy_transforms=False, track_traj_ids=False,
     )
     rows: list[dict[str, float]] = []
