@@ -172,6 +172,7 @@ class GaussianSampler(nn.Module):
         loc, scale = self.head(observation)
         noise = torch.randn_like(loc)
         action = loc + scale * noise
+        # log N(action; loc, scale), summed over the independent action dimensions.
         log_prob = (-0.5 * noise**2 - scale.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
         return loc, scale, action, log_prob
 
@@ -196,28 +197,32 @@ class Policy:
     actor: ProbabilisticActor
     critic: ValueOperator
 
+    @property
+    def head(self) -> GaussianHead:
+        """The actor's network: observation to Gaussian mean and scale."""
+        head: GaussianHead = self.actor.module[0].module
+        return head
+
     @torch.no_grad()
     def mean_action(self, observation: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean for ``observation``: the deterministic action, computed
         without TensorDict bookkeeping (for step-by-step play)."""
-        loc, _ = self.actor.module[0].module(observation)
-        action: torch.Tensor = loc
-        return action
+        loc: torch.Tensor = self.head(observation)[0]
+        return loc
 
     def sampler(self) -> TensorDictModule:
         """The exploring actor for collectors (``GaussianSampler``; shares the weights)."""
         return TensorDictModule(
-            GaussianSampler(self.actor.module[0].module),
+            GaussianSampler(self.head),
             in_keys=["observation"],
             out_keys=["loc", "scale", "action", "action_log_prob"],
         )
 
     def state_dict(self) -> dict[str, Any]:
         """Everything a checkpoint needs (tensors and plain numbers only)."""
-        head = self.actor.module[0].module
         return {
-            "obs_size": int(head.mlp[0].in_features),
-            "action_size": int(head.log_std.numel()),
+            "obs_size": int(self.head.mlp[0].in_features),
+            "action_size": int(self.head.log_std.numel()),
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
         }

@@ -137,9 +137,9 @@ def evaluate_robot(
     """Run the policy in ``checkpoint`` deterministically for ``episodes`` episodes."""
     console = console or Console()
     policy = load_checkpoint(checkpoint)
-    if policy.actor.module[0].module.log_std.numel() != robot.action_size:
+    if policy.head.log_std.numel() != robot.action_size:
         raise ValueError(
-            f"{checkpoint}: the policy acts on {policy.actor.module[0].module.log_std.numel()} "
+            f"{checkpoint}: the policy acts on {policy.head.log_std.numel()} "
             f"actuators but {robot.name} has {robot.action_size}"
         )
     evaluation = evaluate(robot, policy, physics=physics, env=env, episodes=episodes, seed=seed)
