@@ -36,8 +36,9 @@ with a paired bootstrap CI whose unit follows :mod:`analysis.bootstrap`.
 :func:`rejection_tradeoff` prices an early-rejection rule: env steps saved against how
 many of the final top-k robots it would have thrown away. It is an offline, first-order
 estimate: it keeps the rest of each run as it happened, whereas a GA that rejects early
-would have bred other offspring afterwards. :func:`noise_ceiling` bounds what any
-predictor can reach: the rank agreement of the same structures trained twice.
+would have bred other offspring afterwards. :func:`analysis.noise_ceiling.noise_ceiling`
+bounds what any predictor can reach: the rank agreement of the same structures trained
+twice.
 
 ``python -m analysis.early_slope RUN... --out DIR`` writes the study's report
 (:mod:`analysis.early_slope_report`).
@@ -45,7 +46,6 @@ predictor can reach: the rank agreement of the same structures trained twice.
 
 from __future__ import annotations
 
-import itertools
 import math
 import warnings
 from collections.abc import Sequence
@@ -532,59 +532,6 @@ def rejection_tradeoff(
     table = pd.DataFrame(rows, columns=columns)
     table.insert(7, "saved_share", table["steps_saved"] / table["steps_total"])
     return table
-
-
-# ---------------------------------------------------------------- noise ceiling
-
-
-def noise_ceiling(
-    retrained: pd.DataFrame,
-    rng: np.random.Generator,
-    *,
-    structure: str = "name",
-    seed: str = "train_seed",
-    value: str = "fitness",
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
-) -> pd.Series:
-    """Seed-to-seed rank agreement of the same structures retrained with other seeds.
-
-    No early predictor can rank robots by fitness better than a second training run of
-    the same structure does, so this ρ is the ceiling for :func:`rank_metrics`. With
-    more than two training seeds it is the mean ρ over all seed pairs.
-
-    Args:
-        retrained: One row per (structure, training seed) with its ``value``.
-        rng: Resampling randomness (structures are resampled).
-        structure: Column naming the structure.
-        seed: Column naming the training seed.
-        value: Fitness column.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples.
-
-    Returns:
-        ``rho``, ``ci_low``, ``ci_high``, ``n_structures`` (with every seed present)
-        and ``n_seeds``.
-
-    Raises:
-        ValueError: With fewer than two training seeds.
-    """
-    require_columns(retrained, (structure, seed, value), "retrained table")
-    wide = retrained.pivot_table(index=structure, columns=seed, values=value,
-                                 aggfunc="mean").dropna()
-    if wide.shape[1] < 2:
-        raise ValueError(f"noise ceiling needs at least two values of {seed!r}")
-    columns = [wide[c].to_numpy(dtype=float) for c in wide.columns]
-    pairs = list(itertools.combinations(range(len(columns)), 2))
-
-    def mean_rho(*cols: NDArray[np.float64], axis: int = -1) -> Any:
-        return np.mean([spearman(cols[i], cols[j], axis=axis) for i, j in pairs], axis=0)
-
-    rho = float(mean_rho(*columns)) if len(wide) >= 3 else np.nan
-    low, high = bootstrap_ci(columns, mean_rho, rng, paired=True, confidence=confidence,
-                             n_resamples=n_resamples)
-    return pd.Series(dict(rho=rho, ci_low=low, ci_high=high, n_structures=len(wide),
-                          n_seeds=wide.shape[1]))
 
 
 if __name__ == "__main__":  # python -m analysis.early_slope RUN... --out DIR

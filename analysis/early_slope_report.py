@@ -36,6 +36,7 @@ from analysis import early_slope as es
 from analysis import plots
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
+from analysis.noise_ceiling import noise_ceiling
 from analysis.report import parser
 from analysis.tables import method_order
 
@@ -57,7 +58,7 @@ class EarlySlopeStudy:
         rejection: :func:`analysis.early_slope.rejection_tradeoff`, quantile rule,
             predicting fitness.
         rejection_population: The same with the population-minimum rule.
-        ceiling: :func:`analysis.early_slope.noise_ceiling`, or None without retraining.
+        ceiling: :func:`analysis.noise_ceiling.noise_ceiling`, or None without retraining.
         notes: Sentences on the input and what was left out.
     """
 
@@ -174,7 +175,7 @@ def noise_ceiling_of(
     (``"original"``) beside its retrainings.
 
     Returns:
-        :func:`analysis.early_slope.noise_ceiling` (None when it cannot be computed)
+        :func:`analysis.noise_ceiling.noise_ceiling` (None when it cannot be computed)
         and a sentence about it.
     """
     structures = set(retrained["structure"])
@@ -186,7 +187,7 @@ def noise_ceiling_of(
         .assign(train_seed="original"),
     ], ignore_index=True)
     try:
-        ceiling = es.noise_ceiling(rows, rng, structure="structure", n_resamples=n_resamples)
+        ceiling = noise_ceiling(rows, rng, n_resamples=n_resamples)
     except ValueError as err:
         return None, f"Noise ceiling: not computed ({err})."
     return ceiling, (f"Noise ceiling from {int(ceiling['n_structures'])} structures trained "
@@ -240,7 +241,7 @@ def early_slope_figures(study: EarlySlopeStudy,
     def path(stem: str) -> Path | None:
         return None if folder is None else folder / f"{stem}.png"
 
-    ceiling = None if study.ceiling is None else float(study.ceiling["rho"])
+    ceiling = None if study.ceiling is None else float(study.ceiling["spearman"])
     figures = {f"rank_{t}": plots.plot_rank_metrics(study.metrics, t, ceiling=ceiling,
                                                     path=path(f"rank_{t}"))
                for t in es.TARGETS}
@@ -295,8 +296,14 @@ def _ceiling_markdown(ceiling: pd.Series | None) -> str:
         return ("Absent: no retrained structures were given (`--retrained DIR...`), so "
                 "there is no bound on what a predictor can reach.\n")
     return (f"Spearman ρ between trainings of the same structures: "
-            f"{fmt_ci(ceiling['rho'], ceiling['ci_low'], ceiling['ci_high'])} "
-            f"({int(ceiling['n_structures'])} structures, {int(ceiling['n_seeds'])} seeds).\n")
+            f"{_metric_ci(ceiling, 'spearman')} "
+            f"({int(ceiling['n_structures'])} structures, {int(ceiling['n_seeds'])} seeds); "
+            f"ICC {_metric_ci(ceiling, 'icc')}; top-quarter agreement "
+            f"{_metric_ci(ceiling, 'top_quarter')} (`python -m analysis.noise_ceiling`).\n")
+
+
+def _metric_ci(ceiling: pd.Series, metric: str) -> str:
+    return fmt_ci(ceiling[metric], ceiling[f"{metric}_low"], ceiling[f"{metric}_high"])
 
 
 # ---------------------------------------------------------------- CLI

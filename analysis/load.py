@@ -31,7 +31,7 @@ every column the recording holds (``episode_length``, ``reward/...``, ``loss/...
 ``wall_seconds``, ...).
 
 :func:`load_retrained` reads retrained structures for the noise ceiling
-(:func:`analysis.early_slope.noise_ceiling`).
+(:func:`analysis.noise_ceiling.noise_ceiling`).
 """
 
 from __future__ import annotations
@@ -379,13 +379,14 @@ def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
 
 
 def load_retrained(paths: PathsLike) -> pd.DataFrame:
-    """Fitness of structures trained again, for :func:`analysis.early_slope.noise_ceiling`.
+    """Fitness of structures trained again, for :func:`analysis.noise_ceiling.noise_ceiling`.
 
-    Each path is, or holds at any depth, either a training run (``+exp=train``: its
-    ``summary.json`` names the ``robot``, the ``seed`` and the ``fitness``) or an
+    Each path is, or holds at any depth, a training run (``+exp=train``: its
+    ``summary.json`` names the ``robot``, the ``seed`` and the ``fitness``), an
     evolution run whose robots were retrained (every history row counts, its ``seed``
-    being the training seed). A structure is the robot name without a ``-<birth>``
-    suffix.
+    being the training seed) or a folder of ``python -m analysis.noise_ceiling`` (its
+    ``trainings.csv``: every seed training counts, the random learner's do not). A
+    structure is the robot name without a ``-<birth>`` suffix.
 
     Args:
         paths: Directories as above.
@@ -403,6 +404,14 @@ def load_retrained(paths: PathsLike) -> pd.DataFrame:
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such directory of retrained robots")
         found = False
+        for table_path in sorted({p for p in (path / "trainings.csv",
+                                              *path.rglob("trainings.csv")) if p.is_file()}):
+            trainings = pd.read_csv(table_path)
+            for row in trainings[trainings["role"] == "seed"].itertuples(index=False):
+                rows.append(dict(structure=str(row.structure), train_seed=row.seed,
+                                 fitness=float(row.fitness), budget=row.env_steps,
+                                 source=str(table_path.parent)))
+            found = True
         summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
                      if p.is_file() and p.parent.name != "evals"}
         for summary_path in sorted(summaries):
@@ -427,8 +436,8 @@ def load_retrained(paths: PathsLike) -> pd.DataFrame:
                     found = True
         if not found:
             raise RunDirectoryError(
-                f"{path}: holds no training run (summary.json with robot, seed, fitness) "
-                f"and no evolution run ({HISTORY})"
+                f"{path}: holds no training run (summary.json with robot, seed, fitness), "
+                f"no evolution run ({HISTORY}) and no noise ceiling (trainings.csv)"
             )
     table = pd.DataFrame(rows).drop_duplicates()
     return table.reset_index(drop=True)

@@ -12,6 +12,8 @@ no global state, no display needed), returns it, and writes a PNG when given ``p
 * :func:`plot_best_so_far`: best fitness found against env steps spent, per run.
 * :func:`plot_rank_metrics`, :func:`plot_rejection_tradeoff`, :func:`plot_early_scatter`:
   the early-slope study (:mod:`analysis.early_slope`).
+* :func:`plot_seed_scatter`: fitness under one training seed against another, one point
+  per structure (the noise ceiling, :mod:`analysis.noise_ceiling`).
 """
 
 from __future__ import annotations
@@ -281,4 +283,52 @@ def plot_early_scatter(preds: pd.DataFrame, fraction: float, *,
     if len(rows):
         axes[0].set_ylabel(str(rows["target"].iloc[0]) if "target" in rows else "actual")
         axes[0].legend(fontsize="small")
+    return finish(fig, path)
+
+
+def plot_seed_scatter(seeds: pd.DataFrame, baseline: pd.DataFrame, *,
+                      estimators: Sequence[str] = ("fitness",),
+                      ceiling: pd.DataFrame | None = None, margin: float = 0.0,
+                      path: str | Path | None = None) -> Figure:
+    """Fitness under the first training seed against the second, per estimator.
+
+    Args:
+        seeds: Trainings with ``structure``, ``replicate`` and the estimator columns.
+        baseline: The random learner's trainings (same columns), possibly empty: the
+            structures whose mean fitness does not beat it by more than ``margin`` are
+            drawn hollow.
+        estimators: Fitness columns, one axes each.
+        ceiling: :func:`analysis.noise_ceiling.ceiling_table`, for the titles.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure, with the diagonal drawn in each axes.
+    """
+    require_columns(seeds, ("structure", "replicate", *estimators), "trainings table")
+    fig, axes = new_figure(len(estimators), width=4.4, height=4.2)
+    first, second = sorted(seeds["replicate"].unique())[:2]
+    for ax, estimator in zip(axes, estimators, strict=True):
+        wide = seeds.pivot_table(index="structure", columns="replicate", values=estimator)
+        wide = wide.dropna(subset=[first, second])
+        base = (baseline.groupby("structure")[estimator].mean().reindex(wide.index)
+                if len(baseline) else pd.Series(np.nan, index=wide.index))
+        clears = ~(wide.mean(axis=1) <= base + margin)  # NaN baseline: drawn filled
+        ax.scatter(wide.loc[clears, first], wide.loc[clears, second], s=22,
+                   color="tab:red", label="beats the random learner")
+        ax.scatter(wide.loc[~clears, first], wide.loc[~clears, second], s=22,
+                   facecolors="none", edgecolors="tab:gray", label="does not")
+        values = wide[[first, second]].to_numpy(dtype=float)
+        if values.size:
+            low, high = float(np.nanmin(values)), float(np.nanmax(values))
+            pad = 0.05 * max(high - low, 1e-6)
+            ax.plot([low - pad, high + pad], [low - pad, high + pad], color="0.7", lw=1, zorder=0)
+        title = estimator
+        if ceiling is not None:
+            row = ceiling[ceiling["estimator"] == estimator]
+            if len(row):
+                r = row.iloc[0]
+                title += f": ρ {r['spearman']:.2f}, ICC {r['icc']:.2f}"
+        ax.set(title=title, xlabel=f"seed {first}", ylabel=f"seed {second}")
+    if len(baseline):
+        axes[0].legend(fontsize="small", loc="upper left")
     return finish(fig, path)

@@ -10,9 +10,12 @@ from __future__ import annotations
 import dataclasses
 import time
 import traceback
+from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from evo.components.executors import EvalExecutor
 from evo.envs.task import EnvConfig, Trajectory, build_scene
 from evo.learners.common import LearnerConfig, get_learner, save_checkpoint
 from evo.learners.rollouts import play
@@ -77,6 +80,18 @@ class Outcome:
     wall_seconds: float = 0.0
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
+
+
+def outcome_of(future: Future[Outcome], task: Task, executor: EvalExecutor) -> Outcome:
+    """The outcome of a finished ``evaluate`` future; a crashed worker (the pool is
+    restarted) or an exception outside ``evaluate`` becomes an outcome with the error."""
+    try:
+        return future.result()
+    except BrokenProcessPool:
+        executor.restart()
+        return Outcome(task.birth, task.name, error="the worker process died")
+    except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
+        return Outcome(task.birth, task.name, error=f"{type(err).__name__}: {err}")
 
 
 class EpisodeSampler:

@@ -26,7 +26,6 @@ import math
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +41,7 @@ from evo.components.ga import (
     ReplaceWorst,
     StructureStrategy,
 )
-from evo.evaluation import Job, Outcome, Task, evaluate
+from evo.evaluation import Job, Outcome, Task, evaluate, outcome_of
 from evo.learners.session import write_json
 from evo.record import RecordConfig
 from evo.record.run import Birth, RunRecorder
@@ -151,7 +150,7 @@ class Evolution:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in done:
                     task = running.pop(future)
-                    self._record(task, self._outcome(future, task))
+                    self._record(task, outcome_of(future, task, self.executor))
         finally:
             self.executor.shutdown()
         return self.summary()
@@ -196,16 +195,6 @@ class Evolution:
             offspring.parents,
             offspring.operator,
         )
-
-    def _outcome(self, future: Future[Outcome], task: Task) -> Outcome:
-        """The evaluation's outcome; a crashed worker becomes a recorded error."""
-        try:
-            return future.result()
-        except BrokenProcessPool:
-            self.executor.restart()
-            return Outcome(task.birth, task.name, error="the worker process died")
-        except Exception as err:  # noqa: BLE001 - recorded, the run goes on
-            return Outcome(task.birth, task.name, error=f"{type(err).__name__}: {err}")
 
     def _record(self, task: Task, outcome: Outcome) -> None:
         """Apply replacement, append the history row, save the state."""

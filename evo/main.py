@@ -16,7 +16,6 @@ Tasks (``task=``):
 from __future__ import annotations
 
 import sys
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,66 +36,58 @@ from evo.components.ga import (
     StructureStrategy,
 )
 from evo.config import ConfigError, instantiate, typed
-from evo.envs.task import EnvConfig
+from evo.edge import (
+    executor_of,
+    generator_of,
+    limits_of,
+    physics_of,
+    training_parts,
+    warn_if_failures_cannot_end,
+)
 from evo.evaluation import Job
 from evo.evolution import Evolution, GAConfig, RunLog
-from evo.learners.common import LearnerConfig
-from evo.record import RecordConfig
 from evo.robot import (
-    GeneratorParams,
     InvalidRobotError,
-    Limits,
     Robot,
     RobotFileError,
     load_robot,
-    random_robot,
+    random_robots,
 )
-from evo.robot.builder import PhysicsParams
 
 
 def _robot(cfg: DictConfig) -> Robot:
     """The robot named by ``robot=``; a missing key or bad file is a ``ConfigError``."""
     if cfg.robot is None:
         raise ConfigError("robot: give the robot to use, e.g. robot=robots/four_wheeler.json")
-    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
     try:
-        return load_robot(str(cfg.robot), limits)
+        return load_robot(str(cfg.robot), limits_of(cfg))
     except (RobotFileError, InvalidRobotError) as err:
         raise ConfigError(f"robot: {err}") from None
-
-
-def _physics(cfg: DictConfig) -> PhysicsParams:
-    return typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
 
 
 def run_robots(cfg: DictConfig, out: Path) -> None:
     """Generate, save and picture ``robots.count`` random robots."""
     from evo.robot.gallery import write_gallery
 
-    params = typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
-    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
     count = int(cfg.robots.count)
     if count < 1:
         raise ConfigError(f"robots.count: expected a positive integer, got {count}")
     rng = np.random.default_rng(int(cfg.seed))
-    robots: dict[str, Robot] = {}
-    for _ in range(100 * count):  # distinct structures, as many as asked
-        robot = random_robot(rng, params, limits)
-        robots.setdefault(robot.name, robot)
-        if len(robots) == count:
-            break
-    else:
-        raise ConfigError(f"robots.count: only {len(robots)} distinct robots at these settings")
-    write_gallery(list(robots.values()), out / "robots", _physics(cfg), bool(cfg.robots.render))
+    try:
+        robots = random_robots(rng, count, generator_of(cfg), limits_of(cfg))
+    except ValueError as err:
+        raise ConfigError(f"robots.count: {err}") from None
+    write_gallery(robots, out / "robots", physics_of(cfg), bool(cfg.robots.render))
 
 
 def run_train(cfg: DictConfig, out: Path) -> None:
     """Train one robot and evaluate it (``+exp=train``)."""
     from evo.learners.session import train_robot
 
-    env, learner = typed(EnvConfig, cfg.env, "env"), typed(LearnerConfig, cfg.learner, "learner")
-    warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, env)
-    train_robot(_robot(cfg), physics=_physics(cfg), env=env, learner=learner,
+    parts = training_parts(cfg)
+    learner = parts.learner
+    warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, parts.env)
+    train_robot(_robot(cfg), physics=parts.physics, env=parts.env, learner=learner,
                 seed=int(cfg.seed), out=out)
 
 
@@ -108,14 +99,14 @@ def run_evaluate(cfg: DictConfig, out: Path) -> None:
         raise ConfigError(
             "checkpoint: give the policy to run, e.g. checkpoint=outputs/.../policy.pt"
         )
-    learner = typed(LearnerConfig, cfg.learner, "learner")
+    parts = training_parts(cfg)
     try:
         evaluate_robot(
             _robot(cfg),
             Path(str(cfg.checkpoint)),
-            physics=_physics(cfg),
-            env=typed(EnvConfig, cfg.env, "env"),
-            episodes=learner.eval_episodes,
+            physics=parts.physics,
+            env=parts.env,
+            episodes=parts.learner.eval_episodes,
             seed=int(cfg.seed),
             out=out,
         )
@@ -152,8 +143,7 @@ if not OmegaConf.has_resolver("evo_method"):
 
 
 def _strategy(cfg: DictConfig) -> StructureStrategy:
-    generator = typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
-    limits = typed(Limits, cfg.morphology.limits, "morphology.limits")
+    generator, limits = generator_of(cfg), limits_of(cfg)
     g = cfg.ga
     unknown = sorted(set(map(str, g.keys())) - GA_KEYS)
     if unknown:
@@ -196,13 +186,13 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
-    learner = typed(LearnerConfig, cfg.learner, "learner")
+    parts = training_parts(cfg)
+    learner = parts.learner
     strategy = _strategy(cfg)
     sizes = ("population_size", "robot_budget", "eval_timeout_s")
     ga = typed(GAConfig, {k: cfg.ga[k] for k in sizes if k in cfg.ga}, "ga")
     method = method_label(strategy.code, learner.update)
-    job = Job(_physics(cfg), typed(EnvConfig, cfg.env, "env"), learner, str(out), method,
-              record=typed(RecordConfig, cfg.record, "record"),
+    job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
               timeout_s=ga.eval_timeout_s)
     replacement = instantiate(cfg.ga.replacement, "ga.replacement")
@@ -214,25 +204,8 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     smallest = min(schedule.budget(b, ga.population_size, ga.robot_budget)
                    for b in range(ga.robot_budget))
     warn_if_failures_cannot_end(smallest, "ga.schedule", learner, job.env)
-    executor = instantiate(cfg.executor, "executor")  # last: Ray starts here
+    executor = executor_of(cfg)  # last: Ray starts here
     return EvolveParts(ga, strategy, replacement, schedule, job, executor)
-
-
-def warn_if_failures_cannot_end(
-    budget: int, budget_key: str, learner: LearnerConfig, env: EnvConfig
-) -> None:
-    """Warn when ``budget`` gives each arena fewer control steps than an episode's limit:
-    then only successful episodes end, and fitness (the mean return of the episodes that
-    ended) would count successes alone."""
-    per_arena = budget // learner.num_envs
-    if per_arena < env.task.t_max:
-        warnings.warn(
-            f"{budget_key}: {budget:,} env steps over learner.num_envs={learner.num_envs} "
-            f"arenas is {per_arena} control steps per arena, under the episode limit "
-            f"env.task.t_max={env.task.t_max}: episodes that fail never end, so fitness "
-            "counts mostly successes. Use fewer arenas or a larger budget.",
-            stacklevel=2,
-        )
 
 
 def run_evolve(cfg: DictConfig, out: Path) -> None:

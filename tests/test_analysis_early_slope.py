@@ -187,21 +187,3 @@ def test_population_minimum_rule_uses_each_robots_threshold() -> None:
     preds["threshold"] = [np.nan, 2.0, 2.5, 2.5]  # the first robot faced no population
     row = es.rejection_tradeoff(preds, threshold_column="threshold", top_k=1).iloc[0]
     assert row["rejected"] == 1 and row["top_k_lost"] == 0
-
-
-# ---------------------------------------------------------------- noise ceiling
-
-
-def test_noise_ceiling_of_identical_and_of_independent_retraining() -> None:
-    rng = np.random.default_rng(6)
-    structure = np.repeat([f"robot-{i}" for i in range(40)], 3)
-    train_seed = np.tile([0, 1, 2], 40)
-    quality = np.repeat(rng.normal(size=40), 3)
-    same = pd.DataFrame(dict(name=structure, train_seed=train_seed, fitness=quality))
-    ceiling = es.noise_ceiling(same, rng, n_resamples=200)
-    assert ceiling["rho"] == pytest.approx(1.0) and ceiling["n_seeds"] == 3
-    independent = same.assign(fitness=rng.normal(size=len(same)))
-    ceiling = es.noise_ceiling(independent, rng, n_resamples=500)
-    assert ceiling["ci_low"] < 0 < ceiling["ci_high"] and ceiling["n_structures"] == 40
-    with pytest.raises(ValueError, match="train_seed"):
-        es.noise_ceiling(same[same["train_seed"] == 0], rng)

@@ -26,17 +26,16 @@ from omegaconf import DictConfig, OmegaConf
 from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
 from evo.components.ga import BudgetSchedule, Evolve, RandomStructures, ReplaceWorst, Roulette
 from evo.config import ConfigError, typed
+from evo.edge import physics_of, warn_if_failures_cannot_end
 from evo.envs.task import EnvConfig
 from evo.evolution import GAConfig
 from evo.learners.common import LearnerConfig
 from evo.main import (
     TASKS,
     EvolveParts,
-    _physics,
     _resume_in_place,
     _write_config,
     evolve_parts,
-    warn_if_failures_cannot_end,
 )
 
 REPO = Path(__file__).resolve().parents[1]
@@ -127,7 +126,7 @@ def test_every_experiment_composes_and_builds(
         else:  # train / evaluate: one robot, the same typed settings
             assert isinstance(typed(LearnerConfig, job_cfg.learner, "learner"), LearnerConfig)
             assert isinstance(typed(EnvConfig, job_cfg.env, "env"), EnvConfig)
-            _physics(job_cfg)
+            physics_of(job_cfg)
     text = (CONF / "exp" / f"{experiment}.yaml").read_text()
     assert text.startswith("# @package _global_"), "experiments are global overlays"
 

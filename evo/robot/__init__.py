@@ -8,6 +8,7 @@ from evo.robot.operators import (
     crossover,
     mutate,
     random_robot,
+    random_robots,
 )
 from evo.robot.tree import FORMAT, Edge, ModuleType, Node, Robot
 from evo.robot.validate import InvalidRobotError, Limits, Violation, check, violations
@@ -31,6 +32,7 @@ __all__ = [
     "mutate",
     "parse_robot",
     "random_robot",
+    "random_robots",
     "save_robot",
     "violations",
 ]

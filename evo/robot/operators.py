@@ -176,6 +176,26 @@ def random_robot(
     )
 
 
+def random_robots(
+    rng: np.random.Generator,
+    count: int,
+    params: GeneratorParams | None = None,
+    limits: Limits | None = None,
+) -> list[Robot]:
+    """``count`` random robots of distinct structure (names), in the order drawn.
+
+    Raises:
+        ValueError: When ``100 * count`` draws give fewer distinct structures.
+    """
+    robots: dict[str, Robot] = {}
+    for _ in range(100 * count):
+        robot = random_robot(rng, params, limits)
+        robots.setdefault(robot.name, robot)
+        if len(robots) == count:
+            return list(robots.values())
+    raise ValueError(f"only {len(robots)} distinct robots at these settings, asked for {count}")
+
+
 # --- tree surgery ------------------------------------------------------------------------
 
 

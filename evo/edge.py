@@ -1,0 +1,121 @@
+"""The config edge shared by ``evo/main.py``, the analysis tools and ``bench/``.
+
+``python evo/main.py`` composes its config through ``@hydra.main``; a tool that trains
+robots the way a run does (``python -m analysis.noise_ceiling``, the benchmarks)
+composes the same ``conf/`` tree with the same overrides through :func:`compose_config`.
+Either way, the typed parts every training needs come from one place here, so a key
+is checked, and named in errors, the same way everywhere (STYLE rule 1).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from omegaconf import DictConfig
+
+from evo.components.executors import EvalExecutor
+from evo.config import ConfigError, instantiate, typed
+from evo.envs.task import EnvConfig
+from evo.learners.common import LearnerConfig
+from evo.record import RecordConfig
+from evo.robot import GeneratorParams, Limits
+from evo.robot.builder import PhysicsParams
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+"""The Hydra config tree (``conf/`` at the repository root)."""
+
+
+def compose_config(overrides: Sequence[str]) -> DictConfig:
+    """The config ``python evo/main.py <overrides>`` runs with (Hydra's compose API).
+
+    Raises:
+        ConfigError: For an override Hydra cannot parse or apply (an unknown group or
+            option, a key that is not in the config), with Hydra's own message.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.errors import HydraException
+
+    try:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose("config", overrides=list(overrides))
+    except HydraException as err:
+        raise ConfigError(f"overrides {' '.join(overrides)}: {err}") from None
+
+
+@dataclass(frozen=True, slots=True)
+class TrainingParts:
+    """What training one robot needs from the config, typed."""
+
+    physics: PhysicsParams
+    env: EnvConfig
+    learner: LearnerConfig
+    record: RecordConfig
+
+
+def physics_of(cfg: DictConfig) -> PhysicsParams:
+    """``morphology.physics``: the module constants."""
+    return typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
+
+
+def limits_of(cfg: DictConfig) -> Limits:
+    """``morphology.limits``: what a valid robot may not exceed."""
+    return typed(Limits, cfg.morphology.limits, "morphology.limits")
+
+
+def generator_of(cfg: DictConfig) -> GeneratorParams:
+    """``morphology.generator``: random generation of robots."""
+    return typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
+
+
+def training_parts(cfg: DictConfig) -> TrainingParts:
+    """The physics, env, learner and record groups of ``cfg``, typed.
+
+    Raises:
+        ConfigError: naming the key of the first bad value.
+    """
+    return TrainingParts(
+        physics=physics_of(cfg),
+        env=typed(EnvConfig, cfg.env, "env"),
+        learner=typed(LearnerConfig, cfg.learner, "learner"),
+        record=typed(RecordConfig, cfg.record, "record"),
+    )
+
+
+def executor_of(cfg: DictConfig) -> EvalExecutor:
+    """The ``executor`` group's executor (a local Ray instance starts here)."""
+    executor: EvalExecutor = instantiate(cfg.executor, "executor")
+    return executor
+
+
+def warn_if_failures_cannot_end(
+    budget: int, budget_key: str, learner: LearnerConfig, env: EnvConfig
+) -> None:
+    """Warn when ``budget`` gives each arena fewer control steps than an episode's limit:
+    then only successful episodes end, and fitness (the mean return of the episodes that
+    ended) would count successes alone."""
+    per_arena = budget // learner.num_envs
+    if per_arena < env.task.t_max:
+        warnings.warn(
+            f"{budget_key}: {budget:,} env steps over learner.num_envs={learner.num_envs} "
+            f"arenas is {per_arena} control steps per arena, under the episode limit "
+            f"env.task.t_max={env.task.t_max}: episodes that fail never end, so fitness "
+            "counts mostly successes. Use fewer arenas or a larger budget.",
+            stacklevel=2,
+        )
+
+
+__all__ = [
+    "CONF_DIR",
+    "ConfigError",
+    "TrainingParts",
+    "compose_config",
+    "executor_of",
+    "generator_of",
+    "limits_of",
+    "physics_of",
+    "training_parts",
+    "warn_if_failures_cannot_end",
+]
