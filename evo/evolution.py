@@ -42,12 +42,14 @@ from evo.components.ga import (
     StructureStrategy,
 )
 from evo.evaluation import Job, Outcome, Task, evaluate, outcome_of
-from evo.learners.session import write_json
+from evo.interrupt import critical
 from evo.record import RecordConfig
 from evo.record.run import Birth, RunRecorder
 from evo.robot.builder import PhysicsParams, build
-from evo.robot.io import load_robot, save_robot
+from evo.robot.io import RobotFileError, load_robot, save_robot
 from evo.robot.operators import OperatorError
+from evo.robot.validate import InvalidRobotError
+from evo.rundir import write_csv, write_json
 
 STATE_VERSION = 1
 HISTORY_COLUMNS = (
@@ -130,29 +132,38 @@ class Evolution:
         self.next_birth = 0
         self.wall_before = 0.0
         self.started = time.perf_counter()
-        (run_dir / "robots").mkdir(parents=True, exist_ok=True)
 
     # ---- the loop -------------------------------------------------------------------------
     def run(self) -> dict[str, Any]:
-        """Evaluate robots until the budget is spent; returns the summary."""
+        """Evaluate robots until the budget is spent; returns the summary.
+
+        Interrupted (any exception, ``evo.interrupt.Interrupted`` included), it stops the
+        evaluations in flight instead of finishing them: they are in the saved state's
+        ``pending`` and are evaluated again, with their own seeds, on resume.
+        """
+        (self.run_dir / "robots").mkdir(parents=True, exist_ok=True)
         running: dict[Future[Outcome], Task] = {}
-        for task in self.pending:  # in flight when a previous session stopped
-            running[self.executor.submit(evaluate, task, self.job)] = task
         try:
+            for task in self.pending:  # in flight when a previous session stopped
+                running[self.executor.submit(evaluate, task, self.job)] = task
             while True:
                 while len(running) < self.executor.workers and self._can_submit(running):
-                    task = self._next_task(running)
-                    self.pending.append(task)
-                    self._save()
+                    with critical():
+                        task = self._next_task(running)
+                        self.pending.append(task)
+                        self._save()
                     running[self.executor.submit(evaluate, task, self.job)] = task
                 if not running:
                     break
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in done:
                     task = running.pop(future)
-                    self._record(task, outcome_of(future, task, self.executor))
-        finally:
-            self.executor.shutdown()
+                    with critical():
+                        self._record(task, outcome_of(future, task, self.executor))
+        except BaseException:
+            self.executor.terminate()
+            raise
+        self.executor.shutdown()
         return self.summary()
 
     def _can_submit(self, running: dict[Future[Outcome], Task]) -> bool:
@@ -250,9 +261,8 @@ class Evolution:
         }
         write_json(self.run_dir / "state.json", state)
         if self.history:
-            tmp = self.run_dir / "history.csv.tmp"
-            pd.DataFrame(self.history, columns=list(HISTORY_COLUMNS)).to_csv(tmp, index=False)
-            tmp.replace(self.run_dir / "history.csv")
+            write_csv(self.run_dir / "history.csv",
+                      pd.DataFrame(self.history, columns=list(HISTORY_COLUMNS)))
         write_json(self.run_dir / "population.json", {"population": state["population"]})
         write_json(self.run_dir / "summary.json", self.summary())
 
@@ -261,29 +271,17 @@ class Evolution:
         """Wall time over every session of this run."""
         return self.wall_before + time.perf_counter() - self.started
 
-    def resume(self) -> None:
-        """Load ``state.json`` from the run directory (see the module docstring)."""
-        path = self.run_dir / "state.json"
-        try:
-            state = json.loads(path.read_text())
-            if state.get("version") != STATE_VERSION:
-                raise ValueError(
-                    f"state version {state.get('version')!r}, expected {STATE_VERSION}"
-                )
-            self.seed = int(state["seed"])
-            self.next_birth = int(state["next_birth"])
-            self.rng.bit_generator.state = state["rng"]
-            self.history = list(state["history"])
-            self.pending = [Task(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
-            self.population = [
-                Member(m["name"], load_robot(self._robot_path(m["name"])), float(m["fitness"]))
-                for m in state["population"]
-            ]
-            self.wall_before = float(state["wall_seconds"])
-        except FileNotFoundError:
-            raise ValueError(f"{path}: no saved state; is this an evo run directory?") from None
-        except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{path}: unreadable run state ({err})") from None
+    def resume(self, saved: SavedState | None = None) -> None:
+        """Continue from ``saved`` (by default :func:`load_state` of the run directory).
+
+        Raises:
+            ValueError: From :func:`load_state`, before anything is written.
+        """
+        saved = load_state(self.run_dir) if saved is None else saved
+        self.seed, self.next_birth = saved.seed, saved.next_birth
+        self.rng.bit_generator.state = saved.rng
+        self.history, self.pending = list(saved.history), list(saved.pending)
+        self.population, self.wall_before = list(saved.population), saved.wall_seconds
         # The run may have stopped between the state and the files derived from it.
         self._save()
 
@@ -309,6 +307,82 @@ class Evolution:
             "steps_per_second": steps / max(self.wall_seconds, 1e-9),
             "complete": len(self.history) >= self.ga.robot_budget,
         }
+
+
+@dataclass(frozen=True)
+class SavedState:
+    """A run's saved state, checked (see :func:`load_state`)."""
+
+    seed: int
+    next_birth: int
+    rng: dict[str, Any]
+    population: list[Member]
+    history: list[dict[str, Any]]
+    pending: list[Task]
+    wall_seconds: float
+
+
+def load_state(run_dir: Path) -> SavedState:
+    """Read and check ``state.json`` and the files it refers to, writing nothing.
+
+    Checked: the state parses, has this version, its RNG state loads, every birth up to
+    ``next_birth`` is either in the history or in flight (once), every robot it names is
+    a valid file in ``robots/``, the population's members are in the history, and
+    ``history.csv`` (derived from the state, and rebuilt from it) holds no row the state
+    does not.
+
+    Raises:
+        ValueError: Naming the file and what is wrong with it.
+    """
+    path = run_dir / "state.json"
+    try:
+        state = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no saved state; is this an evo run directory?") from None
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: unreadable run state ({err})") from None
+    try:
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            version = state.get("version") if isinstance(state, dict) else None
+            raise ValueError(f"state version {version!r}, expected {STATE_VERSION}")
+        np.random.default_rng().bit_generator.state = state["rng"]
+        history = [dict(row) for row in state["history"]]
+        pending = [Task(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
+        fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
+        saved = (int(state["seed"]), int(state["next_birth"]), float(state["wall_seconds"]))
+        births = sorted([int(r["birth"]) for r in history] + [t.birth for t in pending])
+        names = [str(r["name"]) for r in history] + [t.name for t in pending]
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
+        raise ValueError(f"{path}: unreadable run state ({err})") from None
+    if births != list(range(saved[1])):
+        raise ValueError(f"{path}: inconsistent run state (births {births} recorded or in "
+                         f"flight, expected each of 0..{saved[1] - 1} once)")
+    if not set(fitness) <= set(names):
+        raise ValueError(f"{path}: inconsistent run state (population members "
+                         f"{sorted(set(fitness) - set(names))} are not in its history)")
+    robots = {}
+    for name in dict.fromkeys(names):
+        try:
+            robots[name] = load_robot(run_dir / "robots" / f"{name}.json")
+        except (RobotFileError, InvalidRobotError) as err:
+            raise ValueError(f"{path} needs robot {name}: {err}") from None
+    _check_history_csv(run_dir / "history.csv", [str(r["name"]) for r in history])
+    population = [Member(name, robots[name], f) for name, f in fitness.items()]
+    return SavedState(saved[0], saved[1], state["rng"], population, history, pending, saved[2])
+
+
+def _check_history_csv(path: Path, names: list[str]) -> None:
+    """``history.csv`` may lag the state by a row, never lead it or disagree with it."""
+    if not path.exists():
+        return
+    try:
+        rows = pd.read_csv(path, usecols=["name"])["name"].astype(str).tolist()
+    except (OSError, ValueError) as err:
+        raise ValueError(f"{path}: unreadable ({err}); it is rebuilt from state.json if you "
+                         "move it away") from None
+    if rows != names[: len(rows)]:
+        raise ValueError(f"{path}: its rows do not match state.json's history (is it from "
+                         "another run?); it is rebuilt from state.json if you move it away")
 
 
 class RunLog:

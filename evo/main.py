@@ -45,7 +45,8 @@ from evo.edge import (
     warn_if_failures_cannot_end,
 )
 from evo.evaluation import Job
-from evo.evolution import Evolution, GAConfig, RunLog
+from evo.evolution import Evolution, GAConfig, RunLog, SavedState, load_state
+from evo.interrupt import Interrupted, handle_signals
 from evo.robot import (
     InvalidRobotError,
     Robot,
@@ -53,6 +54,7 @@ from evo.robot import (
     load_robot,
     random_robots,
 )
+from evo.rundir import RunDirectoryBusy, RunLock
 
 
 def _robot(cfg: DictConfig) -> Robot:
@@ -65,7 +67,7 @@ def _robot(cfg: DictConfig) -> Robot:
         raise ConfigError(f"robot: {err}") from None
 
 
-def run_robots(cfg: DictConfig, out: Path) -> None:
+def run_robots(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     """Generate, save and picture ``robots.count`` random robots."""
     from evo.robot.gallery import write_gallery
 
@@ -80,7 +82,7 @@ def run_robots(cfg: DictConfig, out: Path) -> None:
     write_gallery(robots, out / "robots", physics_of(cfg), bool(cfg.robots.render))
 
 
-def run_train(cfg: DictConfig, out: Path) -> None:
+def run_train(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     """Train one robot and evaluate it (``+exp=train``)."""
     from evo.learners.session import train_robot
 
@@ -91,7 +93,7 @@ def run_train(cfg: DictConfig, out: Path) -> None:
                 seed=int(cfg.seed), out=out)
 
 
-def run_evaluate(cfg: DictConfig, out: Path) -> None:
+def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     """Evaluate a trained policy deterministically (``+exp=evaluate``)."""
     from evo.learners.session import evaluate_robot
 
@@ -208,13 +210,23 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     return EvolveParts(ga, strategy, replacement, schedule, job, executor)
 
 
-def run_evolve(cfg: DictConfig, out: Path) -> None:
-    """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues."""
+def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+    """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues.
+
+    Everything is checked before anything is written: the config, and when the
+    directory holds a run, its saved state (:func:`evo.evolution.load_state`). A resume
+    that fails leaves the directory as it was.
+    """
     from evo.progress import evolution_progress, print_summary
 
-    if cfg.resume is not None:
+    resuming = cfg.resume is not None
+    if resuming:
         cfg = _resumed_config(Path(str(cfg.resume)))
+        check_seed(cfg)
     parts = evolve_parts(cfg, out)
+    saved = _saved_state(out) if resuming or (out / "state.json").exists() else None
+    if resuming:
+        lock.claim()
     log = RunLog(out, parts.job.record, {"config": parts.job.config_yaml, "seed": int(cfg.seed),
                                          "method": parts.job.method, "name": out.name})
     with evolution_progress(parts.ga.robot_budget, parts.job.method) as show:
@@ -234,11 +246,8 @@ def run_evolve(cfg: DictConfig, out: Path) -> None:
             seed=int(cfg.seed),
             on_result=on_result,
         )
-        if (out / "state.json").exists():
-            try:
-                evolution.resume()
-            except ValueError as err:
-                raise ConfigError(f"resume: {err}") from None
+        if saved is not None:
+            evolution.resume(saved)
             show.resumed(evolution.history)
             for row in evolution.history:
                 log(row)
@@ -247,6 +256,34 @@ def run_evolve(cfg: DictConfig, out: Path) -> None:
         finally:
             log.close(evolution.history, parts.job.physics, summary=evolution.summary())
     print_summary(summary, out)
+
+
+def _saved_state(run_dir: Path) -> SavedState:
+    """The checked state of the run in ``run_dir``; a clear ``ConfigError`` otherwise."""
+    if not (run_dir / "state.json").exists():
+        found = []
+        if (run_dir / "history.csv").is_file():
+            rows = max(0, len((run_dir / "history.csv").read_text().splitlines()) - 1)
+            found.append(f"history.csv with {rows} row(s)")
+        if (run_dir / "robots").is_dir():
+            found.append(f"robots/ with {len(list((run_dir / 'robots').glob('*.json')))} "
+                         "robot(s)")
+        held = f" It holds {' and '.join(found)} of an earlier run." if found else ""
+        raise ConfigError(
+            f"resume: {run_dir} has no state.json, so there is no run to continue.{held} "
+            f"To start afresh, choose a new hydra.run.dir (or empty {run_dir} first)")
+    try:
+        return load_state(run_dir)
+    except ValueError as err:
+        raise ConfigError(f"resume: {err}") from None
+
+
+def check_seed(cfg: DictConfig) -> int:
+    """The root seed: a non-negative integer (numpy's seed sequences take no other)."""
+    seed = cfg.seed
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed: expected a non-negative integer, got {seed!r}")
+    return seed
 
 
 def _resumed_config(run_dir: Path) -> DictConfig:
@@ -266,13 +303,13 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     return loaded
 
 
-def _write_config(cfg: DictConfig, out: Path) -> None:
-    """Save the resolved config in the run directory.
+def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> None:
+    """Save the resolved config in the run directory (after ``lock.claim()``).
 
     A directory that already holds an evolution state (the same command run again, e.g.
     a requeued cluster job or a stopped sweep started again with the same
     ``hydra.sweep.dir``) is continued only when the config is the same; anything else
-    would mix two runs in one directory.
+    would mix two runs in one directory, and is refused before anything is written.
     """
     text = OmegaConf.to_yaml(cfg, resolve=True)
     path = out / "config.yaml"
@@ -281,10 +318,12 @@ def _write_config(cfg: DictConfig, out: Path) -> None:
             f"hydra.run.dir: {out} already holds a run with another config; continue it "
             f"with resume={out}, or choose a new output directory"
         )
+    if lock is not None:
+        lock.claim()
     path.write_text(text)
 
 
-TASKS: dict[str, Callable[[DictConfig, Path], None]] = {
+TASKS: dict[str, Callable[[DictConfig, Path, RunLock], None]] = {
     "evolve": run_evolve,
     "robots": run_robots,
     "train": run_train,
@@ -294,22 +333,42 @@ TASKS: dict[str, Callable[[DictConfig, Path], None]] = {
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> None:
-    """Dispatch on ``task``; a bad config value ends the run with one clear line."""
+    """Dispatch on ``task`` in a run directory this process owns (``evo.rundir``).
+
+    A bad config value, or a directory another process holds, ends the run with one
+    clear line (exit 2). SIGINT or SIGTERM stop it cleanly (``evo.interrupt``): the
+    evaluations in flight are stopped, the state and recordings are kept, and one line
+    says how to continue (exit 130 or 143).
+    """
     out = Path(HydraConfig.get().runtime.output_dir)
+    lock = RunLock(out)
     try:
-        task = TASKS.get(str(cfg.task))
-        if task is None:
-            raise ConfigError(f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
-        threads = cfg.torch_threads
-        if not isinstance(threads, int) or threads < 1:
-            raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
-        torch.set_num_threads(threads)
-        if cfg.resume is None:
-            _write_config(cfg, out)
-        task(cfg, out)
+        with handle_signals(), lock:
+            task = TASKS.get(str(cfg.task))
+            if task is None:
+                raise ConfigError(
+                    f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
+            threads = cfg.torch_threads
+            if not isinstance(threads, int) or threads < 1:
+                raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
+            torch.set_num_threads(threads)
+            if cfg.resume is None:
+                check_seed(cfg)
+                _write_config(cfg, out, lock)
+            task(cfg, out, lock)
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)
         sys.exit(2)
+    except RunDirectoryBusy as err:
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    except (Interrupted, KeyboardInterrupt) as stop:
+        code = stop.exit_code if isinstance(stop, Interrupted) else 130
+        if str(cfg.task) == "evolve":
+            print(f"interrupted; continue with: python evo/main.py resume={out}", file=sys.stderr)
+        else:
+            print(f"interrupted; {out} is incomplete", file=sys.stderr)
+        sys.exit(code)
 
 
 def _resume_in_place(argv: list[str]) -> list[str]:
@@ -327,7 +386,8 @@ def _resume_in_place(argv: list[str]) -> list[str]:
                     file=sys.stderr,
                 )
                 sys.exit(2)
-            return [*argv, f"hydra.run.dir={run_dir}", "hydra.output_subdir=null"]
+            return [*argv, f"hydra.run.dir={run_dir}", "hydra.output_subdir=null",
+                    "hydra/job_logging=disabled"]
     return argv
 
 

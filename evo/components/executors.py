@@ -10,12 +10,17 @@ evolution loop waits on whichever finishes first, whatever runs it.
 
 Each worker sets torch's and MuJoCo's thread counts so that ``workers x threads`` does
 not oversubscribe the cores.
+
+``shutdown`` ends an executor when the work is done; ``terminate`` stops it now (the run
+was interrupted): evaluations in flight are stopped, not finished, and no worker
+process outlives it (see :mod:`evo.interrupt`).
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import time
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass
@@ -43,6 +48,8 @@ class EvalExecutor(Protocol):
     def restart(self) -> None: ...
 
     def shutdown(self) -> None: ...
+
+    def terminate(self) -> None: ...
 
 
 @dataclass
@@ -74,6 +81,16 @@ class SerialExecutor(Executor):
     def restart(self) -> None:
         """Nothing to restart."""
 
+    def terminate(self) -> None:
+        """Nothing runs in the background: an interrupt stops the evaluation itself."""
+
+
+def _init_worker(threads: int, parent: int) -> None:
+    from evo.interrupt import worker_init
+
+    set_threads(threads)
+    worker_init(parent)
+
 
 @dataclass
 class LocalExecutor:
@@ -100,13 +117,15 @@ class LocalExecutor:
             self._pool = ProcessPoolExecutor(
                 self.workers,
                 mp_context=multiprocessing.get_context("spawn"),
-                initializer=set_threads,
-                initargs=(self.threads,),
+                initializer=_init_worker,
+                initargs=(self.threads, os.getpid()),
             )
         return self._pool
 
     def submit(self, fn: Callable[..., T], *args: Any) -> Future[T]:
-        return self._get().submit(fn, *args)
+        from evo.interrupt import guarded
+
+        return self._get().submit(guarded, fn, *args)
 
     def restart(self) -> None:
         """Replace a broken pool (a worker died) with a fresh one; a healthy pool stays.
@@ -125,6 +144,24 @@ class LocalExecutor:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+
+    def terminate(self, grace_s: float = 10.0) -> None:
+        """Stop every worker now: SIGTERM (an evaluation closes its files and exits),
+        then SIGKILL for any still alive after ``grace_s`` seconds."""
+        if self._pool is None:
+            return
+        # The pool keeps its worker processes in ``_processes`` (CPython 3.9+).
+        processes = list(getattr(self._pool, "_processes", {}).values())
+        for process in processes:
+            process.terminate()
+        deadline = time.monotonic() + grace_s
+        for process in processes:
+            process.join(max(0.0, deadline - time.monotonic()))
+            if process.is_alive():
+                process.kill()
+                process.join()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = None
 
 
 @dataclass
@@ -154,9 +191,12 @@ class RayExecutor:
         cpus = int(ray.cluster_resources().get("CPU", 1))  # type: ignore[no-untyped-call]
         self.workers = self.workers or max(1, cpus // self.threads)
         self._remote = ray.remote(num_cpus=self.threads, max_retries=0)(_ray_call)
+        self._refs: list[Any] = []
 
     def submit(self, fn: Callable[..., T], *args: Any) -> Future[T]:
-        future: Future[T] = self._remote.remote(self.threads, fn, *args).future()
+        ref = self._remote.remote(self.threads, fn, *args)
+        self._refs = [r for r in self._refs if not _ray_done(r)] + [ref]
+        future: Future[T] = ref.future()
         return future
 
     def restart(self) -> None:
@@ -166,6 +206,22 @@ class RayExecutor:
         import ray
 
         ray.shutdown()
+
+    def terminate(self) -> None:
+        """Cancel every task in flight (its worker is killed), then disconnect."""
+        import ray
+
+        for ref in self._refs:
+            ray.cancel(ref, force=True)
+        self._refs = []
+        ray.shutdown()
+
+
+def _ray_done(ref: Any) -> bool:
+    import ray
+
+    ready, _ = ray.wait([ref], timeout=0)
+    return bool(ready)
 
 
 def _ray_call(threads: int, fn: Callable[..., T], *args: Any) -> T:

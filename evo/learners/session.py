@@ -9,7 +9,6 @@ learning curve, one row per collector batch), ``policy.pt`` (loads with
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -23,14 +22,7 @@ from evo.learners.ppo import evaluate
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
-
-
-def write_json(path: Path, data: dict[str, Any]) -> Path:
-    """Write ``data`` as JSON atomically (a crash leaves the old file or the new one)."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    tmp.replace(path)
-    return path
+from evo.rundir import write_json
 
 
 def _progress(console: Console) -> Progress:

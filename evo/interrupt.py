@@ -1,0 +1,138 @@
+"""Clean shutdown on SIGINT and SIGTERM, in the main process and in evaluation workers.
+
+**Main process.** :func:`handle_signals` turns SIGINT and SIGTERM into an
+:class:`Interrupted` exception raised where the main thread is (waiting for a result,
+or training, with the serial executor), so ``finally`` blocks run: the executor
+stops its workers, the recordings are closed, the lock is released. Code that must
+not be cut in two (appending a result to the state and saving it) runs inside
+:func:`critical`: a signal that arrives there is held back and raised when the block
+ends, so the saved state is always one the run can resume from. A second signal
+while shutting down is ignored.
+
+**Workers.** :func:`worker_init` makes an evaluation worker (a process of the local
+pool) end with its parent: on Linux the kernel sends it SIGTERM when the parent dies
+(``PR_SET_PDEATHSIG``), and everywhere a watchdog thread notices a new parent
+process. SIGINT is ignored there (Ctrl-C reaches the whole process group; the main
+process decides). SIGTERM inside an evaluation raises :class:`Interrupted`, so the
+evaluation's recorder closes its files, and the worker then exits
+(:func:`guarded`); SIGTERM between evaluations exits at once.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from types import FrameType
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}
+"""Exit code of a run ended by each signal (128 + the signal number)."""
+
+
+class Interrupted(BaseException):  # noqa: N818 - like KeyboardInterrupt, not an error
+    """SIGINT or SIGTERM arrived; ``signum`` says which."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        return EXIT_CODES.get(signal.Signals(self.signum), 128 + self.signum)
+
+
+_held: list[int] = []  # signals that arrived inside a critical block
+_depth = 0  # nesting of critical blocks
+_stopping = False  # a signal was raised: ignore the next ones
+
+
+def _on_signal(signum: int, frame: FrameType | None) -> None:
+    global _stopping
+    if _stopping:
+        return
+    if _depth:
+        _held.append(signum)
+        return
+    _stopping = True
+    raise Interrupted(signum)
+
+
+@contextmanager
+def handle_signals() -> Iterator[None]:
+    """Raise :class:`Interrupted` on SIGINT and SIGTERM inside the block (main thread)."""
+    global _stopping
+    before = {s: signal.signal(s, _on_signal) for s in EXIT_CODES}
+    _stopping = False
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+        _held.clear()
+
+
+@contextmanager
+def critical() -> Iterator[None]:
+    """Hold back SIGINT and SIGTERM until the block ends (then raise the first one)."""
+    global _depth, _stopping
+    _depth += 1
+    try:
+        yield
+    finally:
+        _depth -= 1
+    if not _depth and _held and not _stopping:
+        signum = _held[0]
+        _held.clear()
+        _stopping = True
+        raise Interrupted(signum)
+
+
+# ---------------------------------------------------------------- workers
+
+_busy = False  # this worker is inside an evaluation
+
+
+def _worker_signal(signum: int, frame: FrameType | None) -> None:
+    if _busy:
+        raise Interrupted(signum)
+    os._exit(EXIT_CODES.get(signal.Signals(signum), 128 + signum))
+
+
+def worker_init(parent: int) -> None:
+    """Tie this worker process to its parent, PID ``parent`` (see the module docstring)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _worker_signal)
+    try:  # Linux: SIGTERM from the kernel the moment the parent dies
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (AttributeError, OSError):
+        pass
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
+
+
+def guarded(fn: Callable[..., T], *args: Any) -> T:
+    """Run ``fn(*args)`` in a worker; when SIGTERM interrupts it, let its ``finally``
+    blocks and context managers run (recordings are closed), then exit the worker."""
+    global _busy
+    _busy = True
+    try:
+        return fn(*args)
+    except Interrupted as stop:
+        os._exit(stop.exit_code)
+    finally:
+        _busy = False

@@ -1,0 +1,257 @@
+"""Run directories that cannot be lost, shared or silently overwritten, and clean shutdown.
+
+End to end through ``python evo/main.py`` in subprocesses with real (tiny) training:
+
+* a resume that fails leaves every byte of the directory as it was;
+* ``resume=`` of a directory without ``state.json`` refuses and says what is there;
+* one process owns a run directory; a second is refused with the holder's PID, and a
+  SIGKILLed holder does not block the next resume;
+* SIGTERM and SIGINT stop a run with one line and exit 143 or 130, leave no worker
+  process alive, and the resumed run is the uninterrupted one (serial);
+* SIGKILL of the main process alone takes its workers with it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from test_evolution import ENV, TINY, check_run_dir, comparable, main_cmd, read_history, run
+
+from evo.rundir import LOCK_INFO, RunDirectoryBusy, RunLock, is_locked
+
+SLOWER = [*TINY, "ga.schedule.initial=8192", "ga.schedule.first=8192", "ga.schedule.last=8192"]
+"""TINY with a few seconds per robot: long enough to be caught in the middle."""
+
+
+def tree_hash(folder: Path) -> dict[str, str]:
+    """Every file under ``folder`` (relative path) with the SHA-256 of its bytes."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A finished tiny serial run."""
+    run_dir = tmp_path_factory.mktemp("finished") / "run"
+    done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return run_dir
+
+
+def truncate_state(d: Path) -> None:
+    (d / "state.json").write_text((d / "state.json").read_text()[:2000])
+
+
+def drop_a_robot(d: Path) -> None:
+    next((d / "robots").glob("*.json")).unlink()
+
+
+def history_of_another_run(d: Path) -> None:
+    history = pd.read_csv(d / "history.csv")
+    history.loc[0, "name"] = "robot-00000000"
+    history.to_csv(d / "history.csv", index=False)
+
+
+def bad_seed(d: Path) -> None:
+    text = (d / "config.yaml").read_text()
+    (d / "config.yaml").write_text(text.replace("\nseed: 0\n", "\nseed: -1\n"))
+
+
+def inconsistent_births(d: Path) -> None:
+    state = json.loads((d / "state.json").read_text())
+    state["next_birth"] += 1
+    (d / "state.json").write_text(json.dumps(state))
+
+
+BREAKAGES: dict[str, tuple[Callable[[Path], None], str]] = {
+    "truncated state": (truncate_state, "unreadable run state"),
+    "missing state": (lambda d: (d / "state.json").unlink(), "has no state.json"),
+    "missing robot": (drop_a_robot, "needs robot"),
+    "foreign history.csv": (history_of_another_run, "do not match"),
+    "bad seed": (bad_seed, "seed: expected a non-negative integer, got -1"),
+    "inconsistent births": (inconsistent_births, "inconsistent run state"),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("breakage", sorted(BREAKAGES))
+def test_a_failing_resume_leaves_every_byte_as_it_was(
+    finished: Path, tmp_path: Path, breakage: str
+) -> None:
+    run_dir = tmp_path / "run"
+    shutil.copytree(finished, run_dir)
+    damage, message = BREAKAGES[breakage]
+    damage(run_dir)
+    before = tree_hash(run_dir)
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert message in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert tree_hash(run_dir) == before, "a failed resume changed the run directory"
+
+
+@pytest.mark.slow
+def test_resume_without_state_says_what_is_there(finished: Path, tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    shutil.copytree(finished, run_dir)
+    (run_dir / "state.json").unlink()
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 2
+    assert "history.csv with 6 row(s)" in done.stderr and "robots/ with 6" in done.stderr
+    assert "hydra.run.dir" in done.stderr, "says how to start afresh"
+    assert len(read_history(run_dir)) == 6, "the old run is untouched"
+
+
+def test_the_lock_refuses_a_second_holder_and_is_freed_when_released(tmp_path: Path) -> None:
+    first = RunLock(tmp_path).acquire()
+    first.claim()
+    assert is_locked(tmp_path)
+    with pytest.raises(RunDirectoryBusy, match=f"PID {os.getpid()}"):
+        RunLock(tmp_path).acquire()
+    first.release()
+    assert not is_locked(tmp_path)
+    with RunLock(tmp_path):
+        assert is_locked(tmp_path)
+
+
+def children_of(pid: int) -> list[int]:
+    """PIDs of the live child processes of ``pid`` (from /proc)."""
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            kids.append(int(stat.parent.name))
+    return kids
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def wait_until(condition: Callable[[], bool], timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"not within {timeout} s: {what}")
+
+
+def start(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(main_cmd(*args), cwd=cwd, env=ENV, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def rows(run_dir: Path) -> int:
+    path = run_dir / "history.csv"
+    return len(path.read_text().splitlines()) - 1 if path.is_file() else 0
+
+
+@pytest.mark.slow
+def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    proc = start([*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}"], tmp_path)
+    try:
+        wait_until(lambda: (run_dir / LOCK_INFO).is_file(), 60, "the run claims its directory")
+        for second in (main_cmd(f"resume={run_dir}"),
+                       main_cmd(*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}")):
+            done = subprocess.run(second, cwd=tmp_path, env=ENV, capture_output=True,
+                                  text=True, timeout=120)
+            assert done.returncode == 2, done.stderr[-2000:]
+            assert f"{run_dir} is in use by PID {proc.pid}" in done.stderr, done.stderr
+            assert "since" in done.stderr and "Traceback" not in done.stderr
+        wait_until(lambda: rows(run_dir) >= 1, 120, "a first result")
+        proc.kill()
+    finally:
+        proc.kill()
+        proc.wait()
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    check_run_dir(run_dir, robot_budget=6)
+
+
+def interrupt(args: list[str], cwd: Path, run_dir: Path, sig: int) -> tuple[int, str, list[int]]:
+    """Start a run, send ``sig`` once it has a result and workers, return its exit code,
+    stderr and the PIDs of the children it had."""
+    proc = start(args, cwd)
+    try:
+        wait_until(lambda: rows(run_dir) >= 1, 120, "a first result")
+        kids = children_of(proc.pid)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err, kids
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_a_signal_stops_the_run_cleanly_and_no_worker_outlives_it(
+    tmp_path: Path, sig: int, code: int
+) -> None:
+    run_dir = tmp_path / "run"
+    returncode, err, kids = interrupt(
+        [*SLOWER, "executor=local", "executor.workers=2", f"hydra.run.dir={run_dir}"],
+        tmp_path, run_dir, sig)
+    assert returncode == code, err[-2000:]
+    assert err.strip().splitlines()[-1] == (
+        f"interrupted; continue with: python evo/main.py resume={run_dir}"), err[-2000:]
+    assert "Traceback" not in err, err[-3000:]
+    assert kids, "the run had worker processes"
+    wait_until(lambda: not any(alive(k) for k in kids), 5, "every worker gone")
+    for recording in ("run.mcap", "run.rrd"):
+        assert (run_dir / recording).stat().st_size > 0
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    check_run_dir(run_dir, robot_budget=6)
+
+
+@pytest.mark.slow
+def test_a_sigtermed_serial_run_resumes_to_the_uninterrupted_history(
+    tmp_path: Path, finished: Path
+) -> None:
+    run_dir = tmp_path / "run"
+    returncode, err, _ = interrupt([*TINY, "executor=serial", f"hydra.run.dir={run_dir}"],
+                                   tmp_path, run_dir, signal.SIGTERM)
+    assert returncode == 143 and "Traceback" not in err, err[-3000:]
+    assert len(read_history(run_dir)) < 6, "stopped before the end"
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = check_run_dir(run_dir, robot_budget=6)
+    pd.testing.assert_frame_equal(comparable(history), comparable(read_history(finished)))
+
+
+@pytest.mark.slow
+def test_workers_die_with_a_sigkilled_main_process(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    proc = start([*SLOWER, "executor=local", "executor.workers=2", f"hydra.run.dir={run_dir}"],
+                 tmp_path)
+    try:
+        wait_until(lambda: rows(run_dir) >= 1, 120, "a first result")
+        kids = children_of(proc.pid)
+        assert kids
+        proc.kill()  # the main process alone, not its group
+        proc.wait()
+        wait_until(lambda: not any(alive(k) for k in kids), 10, "every worker gone")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
