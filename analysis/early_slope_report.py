@@ -37,7 +37,7 @@ from analysis import plots
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
-from analysis.report import parser
+from analysis.report import parser, report_folder
 from analysis.tables import method_order
 
 REPORT = "early_slope.md"
@@ -333,8 +333,7 @@ def write_early_slope_report(
     Returns:
         The path of the Markdown report.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_folder(out)
     runs = load_runs(paths)
     if study_robots(runs.robots, methods)[0].empty:
         raise RunDirectoryError(
@@ -365,6 +364,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     cli.add_argument("--fractions", nargs="+", type=float, default=list(es.FRACTIONS),
                      help="cuts as fractions of each robot's budget")
     args = cli.parse_args(argv)
+    outside = [f for f in args.fractions if not 0 < f < 1]
+    if outside:
+        print(f"error: --fractions: cuts are fractions of a budget, between 0 and 1 "
+              f"(exclusive); got {', '.join(f'{f:g}' for f in outside)}", file=sys.stderr)
+        return 2
     try:
         report = write_early_slope_report(
             args.runs, args.out, retrained=args.retrained, methods=args.methods,

@@ -60,8 +60,8 @@ EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
     "eval_seed", "curve_source",
 )
 RUN_COLUMNS: tuple[str, ...] = (
-    "run", "method", "seed", "population_size", "robots", "complete", "curves_mcap",
-    "curves_csv", "curves_missing", "path",
+    "run", "method", "seed", "population_size", "robots", "complete", "status",
+    "curves_mcap", "curves_csv", "curves_missing", "path",
 )
 STRUCTURE = re.compile(r"^(robot-[0-9a-f]{8})")
 """A robot name's structure part: re-evaluations of one structure add ``-<birth>``."""
@@ -81,9 +81,12 @@ class Runs:
         robots: Robots table (:mod:`analysis.tables`), in run and birth order.
         curves: Curves table, in run, robot birth and env-step order.
         runs: One row per run directory: ``run``, ``method``, ``seed``,
-            ``population_size``, ``robots``, ``complete`` (``summary.json`` says the
-            run finished), ``curves_mcap``, ``curves_csv``, ``curves_missing`` (robots
-            whose curve came from each source) and ``path``.
+            ``population_size``, ``robots``, ``complete`` (the run finished: its
+            ``summary.json`` says so, no process holds it and its history is whole),
+            ``status`` (``complete``, ``running``: a live process holds the run's lock,
+            or ``partial``: stopped before the end, or its ``history.csv`` was cut
+            mid-row), ``curves_mcap``, ``curves_csv``, ``curves_missing`` (robots whose
+            curve came from each source) and ``path``.
         notes: Sentences about the input a reader should know (CSV fallbacks, ...).
     """
 
@@ -325,7 +328,10 @@ def load_runs(paths: PathsLike) -> Runs:
     robots, curves, runs, notes = [], [], [], []
     for run, run_dir in zip(run_ids(dirs), dirs, strict=True):
         config = read_config(run_dir)
-        history = read_history(run_dir)
+        history, broken = _whole_rows(read_history(run_dir), run_dir / HISTORY)
+        if broken:
+            notes.append(f"run {run}: {broken} row(s) of {run_dir / HISTORY} cut mid-row "
+                         "(a copy taken while it was written?) left out")
         method = run_method(run_dir, history, config)
         seed = _int_setting(config, "seed", run_dir)
         table = robots_of_run(run, method, seed, history)
@@ -337,12 +343,16 @@ def load_runs(paths: PathsLike) -> Runs:
                     f"the MCAP file is missing ({', '.join(csv_names)}) in {run_dir}")
             warnings.warn(note, stacklevel=2)
             notes.append(note)
+        status = _status(run_dir, broken)
+        if status["status"] != "complete":
+            notes.append(f"run {run}: {status['status']}, {len(table)} robot(s) so far "
+                         f"({run_dir}); its numbers may still change")
         robots.append(table)
         curves.append(run_curves)
         runs.append(dict(
             run=run, method=method, seed=seed,
             population_size=config.get("ga", {}).get("population_size"),
-            robots=len(table), complete=bool(_summary(run_dir).get("complete", False)),
+            robots=len(table), **status,
             curves_mcap=int((table["curve_source"] == "mcap").sum()),
             curves_csv=len(csv_names),
             curves_missing=int((table["curve_source"] == "").sum()),
@@ -352,6 +362,32 @@ def load_runs(paths: PathsLike) -> Runs:
     robots_table = robots_table[[*ROBOT_COLUMNS, *EXTRA_ROBOT_COLUMNS]]
     curves_table = _tidy_curves(pd.concat(curves, ignore_index=True), robots_table)
     return Runs(robots_table, curves_table, pd.DataFrame(runs, columns=list(RUN_COLUMNS)), notes)
+
+
+def _whole_rows(history: pd.DataFrame, path: Path) -> tuple[pd.DataFrame, int]:
+    """The history without rows cut mid-write, and how many were cut.
+
+    evo writes ``history.csv`` whole (atomically) and ending in a newline, so a last
+    line without one was cut (a copy taken while it was written); so is a row missing a
+    needed cell or with a half-written ``accepted``.
+    """
+    accepted = history["accepted"].astype(str).str.lower()
+    cut = history[["birth", "name", "budget"]].isna().any(axis=1) | ~accepted.isin(
+        ["true", "false"])
+    text = path.read_bytes()
+    if len(history) and text and not text.endswith(b"\n"):
+        cut.iloc[-1] = True
+    return history[~cut].reset_index(drop=True), int(cut.sum())
+
+
+def _status(run_dir: Path, broken: int) -> dict[str, Any]:
+    """``complete`` and ``status`` of a run (see :class:`Runs`)."""
+    from evo.rundir import is_locked
+
+    if is_locked(run_dir):
+        return dict(complete=False, status="running")
+    complete = bool(_summary(run_dir).get("complete", False)) and not broken
+    return dict(complete=complete, status="complete" if complete else "partial")
 
 
 def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:

@@ -373,8 +373,7 @@ def write_report(
     Returns:
         The path of the Markdown report.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = report_folder(out)
     runs = load_runs(paths)
     if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
         raise RunDirectoryError(
@@ -389,6 +388,22 @@ def write_report(
     tables.summary.to_csv(out / "summary.csv", index=False)
     tables.pairwise.to_csv(out / "pairwise.csv", index=False)
     return report
+
+
+def report_folder(out: str | Path) -> Path:
+    """``out``, created if need be, as a report folder.
+
+    Raises:
+        RunDirectoryError: If it exists and is not a folder, or cannot be created.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise RunDirectoryError(f"--out {out}: exists and is not a folder; give a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise RunDirectoryError(f"--out {out}: cannot create it ({err.strerror or err})") from None
+    return out
 
 
 def parser(description: str) -> argparse.ArgumentParser:

@@ -180,7 +180,7 @@ def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outco
                                seed=task.seed)
             recorder.episode(to_episode(final, sampler.count, result.env_steps))
         result.curve.to_csv(evals / f"{task.name}.csv", index=False)
-        save_checkpoint(result.policy, evals / f"{task.name}.pt", job.learner)
+        save_checkpoint(result.policy, evals / f"{task.name}.pt", job.learner, robot=robot.hash)
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
                         "episodes": result.episodes, "status": "complete"})
     return Outcome(task.birth, task.name, fitness=result.fitness, env_steps=result.env_steps,

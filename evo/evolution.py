@@ -142,6 +142,8 @@ class Evolution:
         ``pending`` and are evaluated again, with their own seeds, on resume.
         """
         (self.run_dir / "robots").mkdir(parents=True, exist_ok=True)
+        if not (self.run_dir / "state.json").exists():
+            self._save()  # a new run has a state from its first moment
         running: dict[Future[Outcome], Task] = {}
         try:
             for task in self.pending:  # in flight when a previous session stopped
@@ -288,7 +290,11 @@ class Evolution:
     def summary(self) -> dict[str, Any]:
         """Robots evaluated, the best robot, env steps and speed so far."""
         done = [r for r in self.history if not r["error"]]
-        best = max(done, key=lambda r: r["fitness"], default=None)
+        # A robot none of whose episodes ended has only a provisional fitness (the mean
+        # return of its unfinished episodes): it is named best only if no robot is better
+        # placed, and then with a note.
+        finished = [r for r in done if r["episodes"] > 0]
+        best = max(finished or done, key=lambda r: r["fitness"], default=None)
         initial = [r["fitness"] for r in done if not r["parents"]]
         steps = int(sum(r["env_steps"] for r in self.history))
         return {
@@ -306,6 +312,9 @@ class Evolution:
             "wall_seconds": self.wall_seconds,
             "steps_per_second": steps / max(self.wall_seconds, 1e-9),
             "complete": len(self.history) >= self.ga.robot_budget,
+            "best_note": (
+                "no robot finished an episode within its budget: the best fitness is the "
+                "mean return of unfinished episodes" if best and not finished else ""),
         }
 
 

@@ -15,6 +15,7 @@ Tasks (``task=``):
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -224,12 +225,19 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         cfg = _resumed_config(Path(str(cfg.resume)))
         check_seed(cfg)
     parts = evolve_parts(cfg, out)
-    saved = _saved_state(out) if resuming or (out / "state.json").exists() else None
+    saved = None
+    if (out / "state.json").exists() or (resuming and _evaluated_before(out)):
+        saved = _saved_state(out)
+    elif resuming:
+        print(f"{out}: no robot was evaluated before the run stopped (no state.json yet); "
+              "starting it from the beginning", file=sys.stderr)
     if resuming:
         lock.claim()
     log = RunLog(out, parts.job.record, {"config": parts.job.config_yaml, "seed": int(cfg.seed),
                                          "method": parts.job.method, "name": out.name})
-    with evolution_progress(parts.ga.robot_budget, parts.job.method) as show:
+    budgets = [parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
+               for b in range(parts.ga.robot_budget)]
+    with evolution_progress(budgets, parts.job.method) as show:
 
         def on_result(row: dict[str, Any]) -> None:
             show(row)
@@ -258,6 +266,11 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     print_summary(summary, out)
 
 
+def _evaluated_before(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds results of evaluations (a history or policies)."""
+    return (run_dir / "history.csv").exists() or any((run_dir / "evals").glob("*.pt"))
+
+
 def _saved_state(run_dir: Path) -> SavedState:
     """The checked state of the run in ``run_dir``; a clear ``ConfigError`` otherwise."""
     if not (run_dir / "state.json").exists():
@@ -265,6 +278,9 @@ def _saved_state(run_dir: Path) -> SavedState:
         if (run_dir / "history.csv").is_file():
             rows = max(0, len((run_dir / "history.csv").read_text().splitlines()) - 1)
             found.append(f"history.csv with {rows} row(s)")
+        policies = len(list((run_dir / "evals").glob("*.pt")))
+        if policies:
+            found.append(f"evals/ with {policies} trained polic{'y' if policies == 1 else 'ies'}")
         if (run_dir / "robots").is_dir():
             found.append(f"robots/ with {len(list((run_dir / 'robots').glob('*.json')))} "
                          "robot(s)")
@@ -371,6 +387,28 @@ def main(cfg: DictConfig) -> None:
         sys.exit(code)
 
 
+def _check_run_dir_arg(argv: list[str]) -> None:
+    """A ``hydra.run.dir=`` that cannot be a run directory (an existing file, or a place
+    that cannot be created) ends here with one line, before Hydra would fail on it."""
+    for arg in argv:
+        if not arg.startswith("hydra.run.dir="):
+            continue
+        run_dir = Path(arg.split("=", 1)[1])
+        problem = None
+        if run_dir.exists() and not run_dir.is_dir():
+            problem = "exists and is not a directory"
+        elif run_dir.is_dir() and not os.access(run_dir, os.W_OK | os.X_OK):
+            problem = "is not writable"
+        else:
+            try:  # what Hydra would do next
+                run_dir.mkdir(parents=True, exist_ok=True)
+            except OSError as err:
+                problem = f"cannot be created ({err.strerror or err})"
+        if problem:
+            print(f"error: bad config: hydra.run.dir: {run_dir} {problem}", file=sys.stderr)
+            sys.exit(2)
+
+
 def _resume_in_place(argv: list[str]) -> list[str]:
     """``resume=DIR`` runs in DIR itself: Hydra writes nothing anywhere else.
 
@@ -392,5 +430,6 @@ def _resume_in_place(argv: list[str]) -> list[str]:
 
 
 if __name__ == "__main__":
+    _check_run_dir_arg(sys.argv[1:])
     sys.argv = _resume_in_place(sys.argv)
     main()

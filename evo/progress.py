@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import datetime
 import math
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,31 +23,74 @@ from rich.table import Table
 
 
 class EvolutionProgress:
-    """Robots done / budget, best and mean fitness of the population, accept rate, ETA."""
+    """Robots done / budget, best and mean fitness of the population, accept rate, ETA.
 
-    def __init__(self, progress: Progress, task: TaskID) -> None:
+    On a terminal it drives a rich progress bar; otherwise (a log file, a cluster job's
+    output) it prints one plain line per evaluated robot, so a log shows the same
+    progress: birth, name, fitness, accepted, the population's best, robots done and the
+    ETA (from the env steps left in the schedule at this session's speed).
+    """
+
+    def __init__(self, budgets: list[int], method: str, console: Console,
+                 progress: Progress | None, task: TaskID | None) -> None:
+        self.budgets, self.method, self.console = budgets, method, console
         self.progress, self.task = progress, task
         self.offspring = self.accepted = 0
+        self.done: set[int] = set()
+        self.started, self.steps = time.perf_counter(), 0
 
-    def __call__(self, row: dict[str, Any]) -> None:
+    def __call__(self, row: dict[str, Any], *, resumed: bool = False) -> None:
+        self.done.add(int(row["birth"]))
+        if not resumed:
+            self.steps += int(row["env_steps"])
         if row["parents"]:
             self.offspring += 1
             self.accepted += int(row["accepted"])
         best, mean = row["population_best"], row["population_mean"]
         rate = f"{self.accepted / self.offspring:.0%}" if self.offspring else "-"
-        status = f"best {best:+.3f} mean {mean:+.3f} accept {rate}" if math.isfinite(best) else ""
-        if row["error"]:
-            status += f" [red]{row['name']} failed[/red]"
-        self.progress.update(self.task, advance=1, status=status)
+        if self.progress is not None and self.task is not None:
+            status = (f"best {best:+.3f} mean {mean:+.3f} accept {rate}"
+                      if math.isfinite(best) else "")
+            if row["error"]:
+                status += f" [red]{row['name']} failed[/red]"
+            self.progress.update(self.task, advance=1, status=status)
+        elif not resumed:
+            self.console.print(self.line(row), highlight=False, soft_wrap=True)
+
+    def line(self, row: dict[str, Any]) -> str:
+        """The plain progress line of one evaluated robot."""
+        outcome = (f"failed ({str(row['error']).strip().splitlines()[-1][:80]})" if row["error"]
+                   else f"fitness {row['fitness']:+.4f} "
+                        f"{'accepted' if row['accepted'] else 'rejected'}")
+        best = row["population_best"]
+        return (f"{self.method} birth {row['birth']} {row['name']}: {outcome}; best "
+                f"{best:+.4f} | {len(self.done)}/{len(self.budgets)} robots | ETA {self.eta()}")
+
+    def eta(self) -> str:
+        """Time left: the budgets of the robots not yet evaluated at this session's speed."""
+        elapsed = time.perf_counter() - self.started
+        if not self.steps or elapsed <= 0:
+            return "-"
+        left = sum(b for i, b in enumerate(self.budgets) if i not in self.done)
+        return str(datetime.timedelta(seconds=round(left / (self.steps / elapsed))))
 
     def resumed(self, history: list[dict[str, Any]]) -> None:
         """Count the robots a previous session already evaluated."""
         for row in history:
-            self(row)
+            self(row, resumed=True)
+        if self.progress is None and history:
+            self.console.print(f"{self.method}: resumed with {len(history)} of "
+                               f"{len(self.budgets)} robots evaluated", highlight=False)
 
 
 @contextmanager
-def evolution_progress(budget: int, method: str) -> Iterator[EvolutionProgress]:
+def evolution_progress(budgets: list[int], method: str,
+                       console: Console | None = None) -> Iterator[EvolutionProgress]:
+    """Progress of a run whose robot ``i`` has training budget ``budgets[i]``."""
+    console = console or Console()
+    if not console.is_terminal:
+        yield EvolutionProgress(budgets, method, console, None, None)
+        return
     progress = Progress(
         TextColumn(f"[bold]{method}"),
         BarColumn(),
@@ -53,9 +98,11 @@ def evolution_progress(budget: int, method: str) -> Iterator[EvolutionProgress]:
         TextColumn("{task.fields[status]}"),
         TimeElapsedColumn(),
         TimeRemainingColumn(),
+        console=console,
     )
     with progress:
-        yield EvolutionProgress(progress, progress.add_task(method, total=budget, status=""))
+        task = progress.add_task(method, total=len(budgets), status="")
+        yield EvolutionProgress(budgets, method, console, progress, task)
 
 
 def print_summary(summary: dict[str, Any], run_dir: Path, console: Console | None = None) -> None:
@@ -77,6 +124,8 @@ def print_summary(summary: dict[str, Any], run_dir: Path, console: Console | Non
         text = f"{value:,.4g}" if isinstance(value, float) else str(value)
         table.add_row(key.replace("_", " "), text)
     console.print(table)
+    if summary.get("best_note"):
+        console.print(f"[yellow]warning:[/yellow] {summary['best_note']}", soft_wrap=True)
     for line in where_to_look(summary, run_dir):
         console.print(line, soft_wrap=True, highlight=False)
 

@@ -21,11 +21,12 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 from omegaconf import OmegaConf
 
 from evo.config import ConfigError, typed
-from evo.envs.task import EnvConfig, Trajectory
+from evo.envs.task import EnvConfig, Trajectory, observation_size
 from evo.learners.common import load_checkpoint
 from evo.learners.rollouts import play
 from evo.robot.builder import PhysicsParams
@@ -48,6 +49,11 @@ def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
     """The robot and its policy checkpoint, in either run-directory layout."""
     if name is None:
         robot_path, policy_path = run_dir / "robot.json", run_dir / "policy.pt"
+        if not robot_path.exists() and (run_dir / "robots").is_dir():
+            names = sorted(p.stem for p in (run_dir / "robots").glob("*.json"))
+            shown = ", ".join(names[:5]) + (", ..." if len(names) > 5 else "")
+            raise ValueError(f"{run_dir} is an evolution run: name the robot to replay "
+                             f"(python -m evo.replay {run_dir} NAME); its robots: {shown}")
     else:
         robot_path, policy_path = (
             run_dir / "robots" / f"{name}.json",
@@ -68,29 +74,61 @@ def write_video(
     height: int = 480,
     fps: int = 20,
 ) -> Path:
-    """Render every frame of ``episodes`` and encode them (mp4 via ffmpeg, or gif)."""
+    """Render every frame of ``episodes`` and encode them (mp4 via ffmpeg, or gif).
+
+    The camera follows the robot: every frame it looks at the point between the brain
+    and the target and stands back just far enough to keep both in view (smoothed over
+    about half a second), so the robot stays a good size however far it drives.
+    """
     import imageio.v2 as imageio
 
     renderer = make_renderer(model, width, height)
     data = mujoco.MjData(model)
     target_body = model.body("target").mocapid[0]
+    brain = model.body("brain").id
     camera = mujoco.MjvCamera()
-    camera.azimuth, camera.elevation = 135.0, -40.0
+    camera.azimuth, camera.elevation = 135.0, -35.0
     try:
         with imageio.get_writer(path, fps=fps) as writer:
             for episode in episodes:
-                centre = (episode.xpos[0, model.body("brain").id] + episode.target) / 2
-                camera.lookat[:] = centre
-                camera.distance = 1.0 + float(np.linalg.norm(episode.target[:2] - centre[:2])) * 2
-                for qpos in episode.qpos:
+                lookat, distance = tracking_shot(episode.xpos[:, brain], episode.target)
+                for t, qpos in enumerate(episode.qpos):
                     data.qpos[:] = qpos
                     data.mocap_pos[target_body] = episode.target
                     mujoco.mj_kinematics(model, data)
+                    camera.lookat[:], camera.distance = lookat[t], distance[t]
                     renderer.update_scene(data, camera=camera)
                     writer.append_data(renderer.render())  # type: ignore[attr-defined]
     finally:
         renderer.close()
     return path
+
+
+def tracking_shot(brain: npt.NDArray[np.float64], target: npt.NDArray[np.float64],
+                  smoothing: float = 0.1) -> tuple[npt.NDArray[np.float64],
+                                                    npt.NDArray[np.float64]]:
+    """Per frame, where a following camera looks and how far back it stands.
+
+    Args:
+        brain: The brain's position in every frame, (T, 3).
+        target: The target, (3,).
+        smoothing: Weight of the new frame in the exponential smoothing (0.1 at 20 Hz:
+            about half a second).
+
+    Returns:
+        Look-at points (T, 3) between the brain and the target, and distances (T,)
+        that frame both with a margin (never nearer than 0.5 m).
+    """
+    lookat = np.empty_like(brain)
+    distance = np.empty(len(brain))
+    point = (brain[0] + target) / 2
+    far = 0.5 + 1.6 * float(np.linalg.norm(brain[0, :2] - target[:2]))
+    for t, position in enumerate(brain):
+        point = (1 - smoothing) * point + smoothing * (position + target) / 2
+        wanted = max(0.5, 0.35 + 1.6 * float(np.linalg.norm(position[:2] - target[:2])))
+        far = (1 - smoothing) * far + smoothing * wanted
+        lookat[t], distance[t] = point, far
+    return lookat, distance
 
 
 def recorded_seed(run_dir: Path, name: str | None) -> int:
@@ -118,7 +156,7 @@ def replay(
     physics, env = _run_config(run_dir)
     robot, policy_path = _files(run_dir, name)
     seed = recorded_seed(run_dir, name) if seed is None else seed
-    policy = load_checkpoint(policy_path)
+    policy = load_checkpoint(policy_path, robot=robot, obs_size=observation_size(robot, env.task))
     core, played = play(robot, policy, physics=physics, env=env, seed=seed, episodes=episodes)
     for i, episode in enumerate(played):
         print(

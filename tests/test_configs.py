@@ -33,6 +33,7 @@ from evo.learners.common import LearnerConfig
 from evo.main import (
     TASKS,
     EvolveParts,
+    _check_run_dir_arg,
     _resume_in_place,
     _write_config,
     evolve_parts,
@@ -292,6 +293,11 @@ def test_main_stops_at_start_with_exit_2_naming_the_key(tmp_path: Path) -> None:
         (["ga.structure=Q"], "ga.structure: expected E (evolve) or R (random), got 'Q'"),
         (["ga.schedule.first=0"], "ga.schedule: first must be >= 1 env step, got 0"),
         (["+ga.colour=red"], "ga: unknown key(s) colour"),
+        (["seed=-1"], "seed: expected a non-negative integer, got -1"),
+        (["learner.gamma=2"], "learner: gamma must be in (0, 1], got 2.0"),
+        (["learner.lr=-1"], "learner: lr must be > 0, got -1.0"),
+        (["ga.schedule.first=4096", "ga.schedule.last=1024"],
+         "ga.schedule: last (1024) must be >= first (4096)"),
         (
             [f"resume={fake_run_dir(tmp_path / 'old')}", "executor=ray"],
             "resume: a resumed run keeps the config it was started with",
@@ -309,8 +315,9 @@ def test_main_stops_at_start_with_exit_2_naming_the_key(tmp_path: Path) -> None:
         assert f"error: bad config: {expected}" in stderr, (args, stderr[-2000:])
         assert "Traceback" not in stderr
         assert list(cwd.iterdir()) == [], f"{args}: wrote into the working directory"
-    for i in range(4):  # nothing was evaluated
+    for i in range(len(cases) - 1):  # nothing was evaluated, or recorded
         assert not (tmp_path / f"run{i}" / "robots").exists()
+        assert not (tmp_path / f"run{i}" / "run.mcap").exists()
 
 
 def test_resume_of_a_directory_that_is_no_run_stops_before_hydra_creates_it(
@@ -324,6 +331,21 @@ def test_resume_of_a_directory_that_is_no_run_stops_before_hydra_creates_it(
     run_dir = fake_run_dir(tmp_path / "run")
     argv = _resume_in_place(["evo/main.py", f"resume={run_dir}"])
     assert f"hydra.run.dir={run_dir}" in argv and "hydra.output_subdir=null" in argv
+
+
+def test_a_run_directory_that_cannot_be_one_stops_before_hydra(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    for run_dir, expected in ((afile, "exists and is not a directory"),
+                              (afile / "sub", "cannot be created")):
+        with pytest.raises(SystemExit) as info:
+            _check_run_dir_arg([f"hydra.run.dir={run_dir}"])
+        assert info.value.code == 2
+        err = capsys.readouterr().err
+        assert f"error: bad config: hydra.run.dir: {run_dir} {expected}" in err, err
+    _check_run_dir_arg([f"hydra.run.dir={tmp_path / 'new' / 'run'}"])  # fine, and made
 
 
 def test_a_new_run_in_a_run_directory_must_have_its_config(

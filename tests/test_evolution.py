@@ -12,6 +12,7 @@ Two tiers:
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -213,6 +214,25 @@ def test_the_same_seed_gives_the_same_run(tmp_path: Path, fake: None) -> None:
     a, b, c = (comparable(read_history(tmp_path / x)) for x in "abc")
     pd.testing.assert_frame_equal(a, b)
     assert list(a["name"]) != list(c["name"])
+
+
+def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def unfinished_when_fit(task: Task, job: Job) -> Outcome:
+        outcome = fake_evaluate(task, job)  # fitness above 0: no episode ended
+        return dataclasses.replace(outcome, episodes=0 if outcome.fitness > 0 else 3)
+
+    monkeypatch.setattr(evolution_module, "evaluate", unfinished_when_fit)
+    summary = make_evolution(tmp_path / "some").run()
+    history = read_history(tmp_path / "some")
+    finished = history[history["episodes"] > 0]
+    assert (history["episodes"] == 0).any() and len(finished)
+    assert summary["best_fitness"] == finished["fitness"].max() and not summary["best_note"]
+    monkeypatch.setattr(evolution_module, "evaluate", lambda task, job: dataclasses.replace(
+        fake_evaluate(task, job), episodes=0))
+    summary = make_evolution(tmp_path / "none").run()
+    assert summary["best_robot"] and "no robot finished an episode" in summary["best_note"]
 
 
 def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(

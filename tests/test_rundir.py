@@ -255,3 +255,16 @@ def test_workers_die_with_a_sigkilled_main_process(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.slow
+def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    from kill_resume import kill_and_resume
+
+    verdict = kill_and_resume(3, seed=1, out=tmp_path / "harness", log=False)
+    assert verdict.landed >= 2, verdict
+    assert verdict.lost == 0 and verdict.twice == 0, verdict
+    assert verdict.identical and not verdict.unreadable, verdict

@@ -121,6 +121,9 @@ class BudgetSchedule:
         for key in ("initial", "first", "last"):
             if getattr(self, key) < 1:
                 raise ValueError(f"{key} must be >= 1 env step, got {getattr(self, key)}")
+        if self.last < self.first:
+            raise ValueError(f"last ({self.last}) must be >= first ({self.first}): budgets "
+                             "rise (or stay) over the offspring, as in the paper")
 
     def budget(self, birth: int, population_size: int, robot_budget: int) -> int:
         """Budget of the robot born ``birth``-th (0-based) in a run of ``robot_budget``."""

@@ -74,6 +74,7 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.core.action_size,), np.float32)
         self.render_mode = render_mode
         self._renderer: mujoco.Renderer | None = None
+        self._needs_reset = True  # before the first reset and after an episode ends
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -82,10 +83,28 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
         if seed is not None:
             self.core.seed(seed)
         observation = self.core.reset()[0]
+        self._needs_reset = False
         return observation, {"target": self.core.target[0].copy()}
 
     def step(self, action: npt.ArrayLike) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
-        step = self.core.step(np.asarray(action, dtype=np.float64)[None])
+        """One control step; ``action`` holds one value in [-1, 1] per actuator.
+
+        Raises:
+            gymnasium.error.ResetNeeded: Before the first ``reset`` and after an episode
+                terminated or was truncated (gymnasium's convention: reset, then step).
+            ValueError: For an action of the wrong size (named with the expected one).
+        """
+        if self._needs_reset:
+            raise gym.error.ResetNeeded(
+                "call reset() before step(): at the start, and after an episode terminated "
+                "or was truncated")
+        act = np.asarray(action, dtype=np.float64)
+        if act.shape != self.action_space.shape:
+            raise ValueError(
+                f"action: expected shape {self.action_space.shape} (one value per motor, then "
+                f"per pivot), got shape {act.shape}")
+        step = self.core.step(act[None])
+        self._needs_reset = bool(step.terminated[0] or step.truncated[0])
         info: dict[str, Any] = {f"reward/{k}": float(v[0]) for k, v in step.terms.items()}
         info["success"] = bool(step.success[0])
         info["unstable"] = bool(step.unstable[0])

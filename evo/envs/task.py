@@ -163,6 +163,12 @@ class _Tracer:
         )
 
 
+def observation_size(robot: Robot, task: TaskParams) -> int:
+    """Length of the reach task's observation for ``robot``: 9 + 2(m + n), + 3 with
+    ``observe_up``."""
+    return robot.obs_size + (3 if task.observe_up else 0)
+
+
 def build_scene(
     robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
 ) -> BuiltRobot:
@@ -269,7 +275,7 @@ class ReachCore:
     @property
     def obs_size(self) -> int:
         """Length of one observation."""
-        return self.robot.obs_size + (3 if self.task.observe_up else 0)
+        return observation_size(self.robot, self.task)
 
     @property
     def action_size(self) -> int:
@@ -341,8 +347,16 @@ class ReachCore:
         return self.observation.copy()
 
     def step(self, action: npt.ArrayLike) -> Step:
-        """Advance every arena one control step with ``action`` of shape (N, m + n)."""
-        act = np.clip(np.asarray(action, dtype=np.float64).reshape(self.num_envs, -1), -1, 1)
+        """Advance every arena one control step with ``action`` of shape (N, m + n).
+
+        Raises:
+            ValueError: When ``action`` does not hold N × (m + n) values.
+        """
+        act = np.asarray(action, dtype=np.float64)
+        if act.size != self.num_envs * self.action_size:
+            raise ValueError(f"action: expected {self.num_envs} x {self.action_size} values "
+                             f"(arenas x actuators), got shape {act.shape}")
+        act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
         self.ctrl[:] = (act * self.ctrl_scale)[:, None, :]
         tick = time.perf_counter()
         self.rollout.rollout(

@@ -77,8 +77,15 @@ class LearnerConfig:
         for key in positive:
             if getattr(self, key) < 1:
                 raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
-        if self.lr <= 0 or not 0 < self.gamma <= 1 or not 0 <= self.lmbda <= 1:
-            raise ValueError("need lr > 0, 0 < gamma <= 1 and 0 <= lmbda <= 1")
+        ranges = (("lr", self.lr > 0, "> 0"), ("gamma", 0 < self.gamma <= 1, "in (0, 1]"),
+                  ("lmbda", 0 <= self.lmbda <= 1, "in [0, 1]"),
+                  ("clip_epsilon", self.clip_epsilon > 0, "> 0"),
+                  ("max_grad_norm", self.max_grad_norm > 0, "> 0"),
+                  ("entropy_coeff", self.entropy_coeff >= 0, ">= 0"),
+                  ("critic_coeff", self.critic_coeff >= 0, ">= 0"))
+        for key, ok, expected in ranges:
+            if not ok:
+                raise ValueError(f"{key} must be {expected}, got {getattr(self, key)}")
         if self.eval_episodes < 0:
             raise ValueError(f"eval_episodes must be >= 0, got {self.eval_episodes}")
         if not self.hidden or min(self.hidden) < 1:
@@ -273,32 +280,66 @@ class TrainResult:
         return self.env_steps / max(self.wall_seconds, 1e-9)
 
 
-def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig) -> Path:
-    """Write the policy to ``path``; ``torch.load(path, weights_only=True)`` reads it."""
+def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig, *,
+                    robot: str = "") -> Path:
+    """Write the policy to ``path``; ``torch.load(path, weights_only=True)`` reads it.
+
+    Besides the weights it stores the observation and action sizes and ``robot``, the
+    hash of the structure it was trained on, which :func:`load_checkpoint` checks.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
     state = policy.state_dict()
     state["hidden"] = list(config.hidden)
     state["normalize_obs"] = config.normalize_obs
+    state["robot"] = robot
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save(state, tmp)
     tmp.replace(path)
     return path
 
 
-def load_checkpoint(path: Path) -> Policy:
-    """The policy saved by ``save_checkpoint``; a clear error for a missing or bad file."""
+def load_checkpoint(path: Path, *, robot: Robot | None = None,
+                    obs_size: int | None = None) -> Policy:
+    """The policy saved by ``save_checkpoint``.
+
+    Args:
+        path: The checkpoint.
+        robot: The robot it is to drive, or None: then it must have been trained on
+            this structure (when the checkpoint names one) and act on as many actuators.
+        obs_size: The observation size of the env it is to run in, or None.
+
+    Raises:
+        ValueError: A missing, unreadable or foreign file, or one that does not fit
+            ``robot`` or ``obs_size``; the message names the file and what is expected.
+    """
+    if path.is_dir():
+        raise ValueError(f"{path}: a folder, not a policy checkpoint (a .pt file)")
     try:
         state = torch.load(path, weights_only=True)
         config = LearnerConfig(
             hidden=tuple(state["hidden"]), normalize_obs=bool(state["normalize_obs"])
         )
-        policy = make_policy(int(state["obs_size"]), int(state["action_size"]), config)
+        sizes = int(state["obs_size"]), int(state["action_size"])
+        policy = make_policy(*sizes, config)
         policy.actor.load_state_dict(state["actor"])
         policy.critic.load_state_dict(state["critic"])
     except FileNotFoundError:
         raise ValueError(f"{path}: no such checkpoint") from None
-    except (KeyError, RuntimeError, TypeError, EOFError) as err:
-        raise ValueError(f"{path}: not an evo policy checkpoint ({err})") from None
+    except Exception as err:  # noqa: BLE001 - torch raises many kinds for a bad file
+        reason = str(err).split(". ")[0].strip() or type(err).__name__
+        raise ValueError(f"{path}: not an evo policy checkpoint ({reason})") from None
+    trained_on = str(state.get("robot", ""))
+    if robot is not None:
+        if trained_on and trained_on != robot.hash:
+            raise ValueError(f"{path}: trained on robot-{trained_on[:8]}, not on {robot.name}; "
+                             "give the checkpoint of this robot")
+        if sizes[1] != robot.action_size:
+            raise ValueError(f"{path}: the policy acts on {sizes[1]} actuators but "
+                             f"{robot.name} has {robot.action_size}")
+    if obs_size is not None and sizes[0] != obs_size:
+        raise ValueError(f"{path}: the policy observes {sizes[0]} values but this env gives "
+                         f"{obs_size}; run it with the env settings it was trained with "
+                         "(env.task.observe_up adds 3)")
     return policy
 
 

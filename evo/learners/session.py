@@ -16,7 +16,7 @@ from typing import Any
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from evo.envs.task import EnvConfig
+from evo.envs.task import EnvConfig, observation_size
 from evo.learners.common import LearnerConfig, get_learner, load_checkpoint, save_checkpoint
 from evo.learners.ppo import evaluate
 from evo.robot.builder import PhysicsParams
@@ -74,7 +74,7 @@ def train_robot(
             on_curve=show,
         )
     result.curve.to_csv(out / "curve.csv", index=False)
-    save_checkpoint(result.policy, out / "policy.pt", learner)
+    save_checkpoint(result.policy, out / "policy.pt", learner, robot=robot.hash)
     summary: dict[str, Any] = {
         "robot": robot.name,
         "learner": learner.name,
@@ -128,12 +128,7 @@ def evaluate_robot(
 ) -> dict[str, Any]:
     """Run the policy in ``checkpoint`` deterministically for ``episodes`` episodes."""
     console = console or Console()
-    policy = load_checkpoint(checkpoint)
-    if policy.head.log_std.numel() != robot.action_size:
-        raise ValueError(
-            f"{checkpoint}: the policy acts on {policy.head.log_std.numel()} "
-            f"actuators but {robot.name} has {robot.action_size}"
-        )
+    policy = load_checkpoint(checkpoint, robot=robot, obs_size=observation_size(robot, env.task))
     evaluation = evaluate(robot, policy, physics=physics, env=env, episodes=episodes, seed=seed)
     summary = {
         "robot": robot.name,

@@ -143,12 +143,17 @@ def _render(args: argparse.Namespace) -> int:
         return EXIT_UNREADABLE
     from evo.robot.render import RenderError, render_png
 
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        print(f"render: --out {out}: expected a .png file name", file=sys.stderr)
+        return EXIT_UNREADABLE
     try:
-        path = render_png(
-            load_robot(args.file), Path(args.out), width=args.width, height=args.height
-        )
+        path = render_png(load_robot(args.file), out, width=args.width, height=args.height)
     except RenderError as err:
         print(f"render: {err}", file=sys.stderr)
+        return EXIT_UNREADABLE
+    except OSError as err:
+        print(f"render: --out {out}: cannot write it ({err.strerror or err})", file=sys.stderr)
         return EXIT_UNREADABLE
     print(path)
     return EXIT_OK
