@@ -173,12 +173,14 @@ def comparable(run_dir: Path) -> pd.DataFrame:
         "birth", key=lambda b: b.astype(int)).reset_index(drop=True)
 
 
-def unreadable_files(run_dir: Path) -> list[str]:
-    """The run's recordings that do not read back (MCAP) or verify (rrd)."""
+def unreadable_files(run_dir: Path, names: tuple[str, ...] = ()) -> list[str]:
+    """The run's recordings (all, or those ``names``) that do not read back (MCAP, with
+    evo's own readers) or verify (``rerun rrd verify``)."""
     from evo.record import read_births, read_curve, read_metadata
 
     bad = []
-    for path in sorted(run_dir.glob("**/*.mcap")):
+    chosen = [run_dir / n for n in names] if names else list(run_dir.glob("**/*"))
+    for path in sorted(p for p in chosen if p.suffix == ".mcap"):
         try:
             if path.name == "run.mcap":
                 read_births(path)
@@ -188,7 +190,7 @@ def unreadable_files(run_dir: Path) -> list[str]:
         except Exception as err:  # noqa: BLE001 - reported, whatever the reader raised
             bad.append(f"{path.name} ({type(err).__name__})")
     rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"
-    for path in sorted(run_dir.glob("**/*.rrd")):
+    for path in sorted(p for p in chosen if p.suffix == ".rrd"):
         check = subprocess.run([rerun, "rrd", "verify", str(path)], capture_output=True)
         if check.returncode != 0:
             bad.append(f"{path.name} (rrd verify)")

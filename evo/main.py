@@ -55,7 +55,7 @@ from evo.robot import (
     load_robot,
     random_robots,
 )
-from evo.rundir import RunDirectoryBusy, RunLock
+from evo.rundir import RunDirectoryBusy, RunLock, busy_message, is_locked
 
 
 def _robot(cfg: DictConfig) -> Robot:
@@ -388,13 +388,17 @@ def main(cfg: DictConfig) -> None:
 
 
 def _check_run_dir_arg(argv: list[str]) -> None:
-    """A ``hydra.run.dir=`` that cannot be a run directory (an existing file, or a place
-    that cannot be created) ends here with one line, before Hydra would fail on it."""
+    """A ``hydra.run.dir=`` that cannot be a run directory (an existing file, a place
+    that cannot be created, or one another process holds) ends here with one line,
+    before Hydra would fail on it or write into it."""
     for arg in argv:
         if not arg.startswith("hydra.run.dir="):
             continue
         run_dir = Path(arg.split("=", 1)[1])
         problem = None
+        if run_dir.is_dir() and is_locked(run_dir):  # before Hydra writes its .hydra/ there
+            print(f"error: {busy_message(run_dir)}", file=sys.stderr)
+            sys.exit(2)
         if run_dir.exists() and not run_dir.is_dir():
             problem = "exists and is not a directory"
         elif run_dir.is_dir() and not os.access(run_dir, os.W_OK | os.X_OK):

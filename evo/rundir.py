@@ -69,8 +69,7 @@ class RunLock:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise RunDirectoryBusy(f"{self.run_dir} is in use by {holder(self.run_dir)}; "
-                                   "wait for it to end, or stop it first") from None
+            raise RunDirectoryBusy(busy_message(self.run_dir)) from None
         self._fd = fd
         return self
 
@@ -93,6 +92,11 @@ class RunLock:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+
+def busy_message(run_dir: Path) -> str:
+    """What a process refused a held run directory is told."""
+    return f"{run_dir} is in use by {holder(run_dir)}; wait for it to end, or stop it first"
 
 
 def holder(run_dir: Path) -> str:

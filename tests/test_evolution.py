@@ -554,9 +554,10 @@ def test_sigkilled_serial_run_resumes_to_the_uninterrupted_history(
 ) -> None:
     run_dir = tmp_path / "run"
     start = [*TINY, "executor=serial", f"hydra.run.dir={run_dir}"]
-    # Killed mid-write of the state (after the first result), then during the training
-    # of the second robot after resuming, then just after the final state was saved.
-    killed("writing-state", 3, *start, cwd=tmp_path)
+    # Killed mid-write of the state (after the first result: the 4th write, after the new
+    # run's empty state, the first submission and the first result), then during the
+    # training of the second robot after resuming, then just after the final state was saved.
+    killed("writing-state", 4, *start, cwd=tmp_path)
     assert len(read_history(run_dir)) == 1
     killed("evaluating", 2, f"resume={run_dir}", cwd=tmp_path)
     assert len(read_history(run_dir)) == 2

@@ -19,6 +19,7 @@ import os
 import shutil
 import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -27,9 +28,12 @@ import pandas as pd
 import pytest
 from test_evolution import ENV, TINY, check_run_dir, comparable, main_cmd, read_history, run
 
-from evo.rundir import LOCK_INFO, RunDirectoryBusy, RunLock, is_locked
+from evo.rundir import RunDirectoryBusy, RunLock, is_locked
 
-SLOWER = [*TINY, "ga.schedule.initial=8192", "ga.schedule.first=8192", "ga.schedule.last=8192"]
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from kill_resume import kill_and_resume, unreadable_files  # noqa: E402
+
+SLOWER = [*TINY, "ga.schedule.initial=4096", "ga.schedule.first=4096", "ga.schedule.last=4096"]
 """TINY with a few seconds per robot: long enough to be caught in the middle."""
 
 
@@ -163,24 +167,39 @@ def rows(run_dir: Path) -> int:
     return len(path.read_text().splitlines()) - 1 if path.is_file() else 0
 
 
+HOLD = """
+import sys, time
+from pathlib import Path
+from evo.rundir import RunLock
+lock = RunLock(Path(sys.argv[1])).acquire()
+lock.claim()
+print("held", flush=True)
+time.sleep(600)
+"""
+
+
 @pytest.mark.slow
-def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(tmp_path: Path) -> None:
+def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(
+    finished: Path, tmp_path: Path
+) -> None:
     run_dir = tmp_path / "run"
-    proc = start([*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}"], tmp_path)
+    shutil.copytree(finished, run_dir)
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(run_dir)], env=ENV,
+                              stdout=subprocess.PIPE, text=True)
     try:
-        wait_until(lambda: (run_dir / LOCK_INFO).is_file(), 60, "the run claims its directory")
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
         for second in (main_cmd(f"resume={run_dir}"),
-                       main_cmd(*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}")):
-            done = subprocess.run(second, cwd=tmp_path, env=ENV, capture_output=True,
-                                  text=True, timeout=120)
+                       main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}")):
+            before = tree_hash(run_dir)
+            done = run(second, tmp_path)
             assert done.returncode == 2, done.stderr[-2000:]
-            assert f"{run_dir} is in use by PID {proc.pid}" in done.stderr, done.stderr
+            assert f"{run_dir} is in use by PID {holder.pid}" in done.stderr, done.stderr
             assert "since" in done.stderr and "Traceback" not in done.stderr
-        wait_until(lambda: rows(run_dir) >= 1, 120, "a first result")
-        proc.kill()
+            assert tree_hash(run_dir) == before, "the refused process wrote"
+        holder.kill()  # SIGKILL: the kernel drops the lock
     finally:
-        proc.kill()
-        proc.wait()
+        holder.kill()
+        holder.wait()
     done = run(main_cmd(f"resume={run_dir}"), tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     check_run_dir(run_dir, robot_budget=6)
@@ -203,25 +222,32 @@ def interrupt(args: list[str], cwd: Path, run_dir: Path, sig: int) -> tuple[int,
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
-def test_a_signal_stops_the_run_cleanly_and_no_worker_outlives_it(
-    tmp_path: Path, sig: int, code: int
-) -> None:
+def test_sigterm_stops_the_run_cleanly_and_no_worker_outlives_it(tmp_path: Path) -> None:
+    from evo.evolution import load_state
+
     run_dir = tmp_path / "run"
     returncode, err, kids = interrupt(
         [*SLOWER, "executor=local", "executor.workers=2", f"hydra.run.dir={run_dir}"],
-        tmp_path, run_dir, sig)
-    assert returncode == code, err[-2000:]
+        tmp_path, run_dir, signal.SIGTERM)
+    assert returncode == 143, err[-2000:]
     assert err.strip().splitlines()[-1] == (
         f"interrupted; continue with: python evo/main.py resume={run_dir}"), err[-2000:]
     assert "Traceback" not in err, err[-3000:]
     assert kids, "the run had worker processes"
     wait_until(lambda: not any(alive(k) for k in kids), 5, "every worker gone")
-    for recording in ("run.mcap", "run.rrd"):
-        assert (run_dir / recording).stat().st_size > 0
-    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
-    assert done.returncode == 0, done.stderr[-3000:]
-    check_run_dir(run_dir, robot_budget=6)
+    saved = load_state(run_dir)  # resumable: what was in flight is pending
+    assert saved.history and saved.pending
+    assert unreadable_files(run_dir) == [], "every recording closed, in-flight ones too"
+
+
+@pytest.mark.slow
+def test_sigint_stops_the_run_with_exit_code_130(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    returncode, err, _ = interrupt([*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}"],
+                                   tmp_path, run_dir, signal.SIGINT)
+    assert returncode == 130 and "Traceback" not in err, err[-3000:]
+    assert "interrupted; continue with: python evo/main.py resume=" in err
+    assert unreadable_files(run_dir) == [], "every recording closed"
 
 
 @pytest.mark.slow
@@ -259,11 +285,6 @@ def test_workers_die_with_a_sigkilled_main_process(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    from kill_resume import kill_and_resume
-
     verdict = kill_and_resume(3, seed=1, out=tmp_path / "harness", log=False)
     assert verdict.landed >= 2, verdict
     assert verdict.lost == 0 and verdict.twice == 0, verdict
