@@ -2,9 +2,10 @@
 
 For each example robot, arena, batch size N and thread count, this measures in one run:
 
-* ``raw``: ``mujoco.rollout`` stepping the same compiled model for N arenas on the same
-  number of threads with the same frame skip, random controls, no Python in between:
-  the limit any environment on this model can reach;
+* ``raw``: a persistent ``mujoco.batch.Batch`` stepping the same compiled model (the
+  env's options, sleeping rocks included) for N arenas on the same number of threads
+  with the same frame skip, random controls, no Python in between: the limit any
+  environment on this model can reach;
 * ``env``: ``ReachEnv`` (TorchRL, random actions, automatic partial resets through
   ``step_and_maybe_reset`` exactly as a collector drives it).
 
@@ -21,6 +22,7 @@ import glob
 import time
 
 import mujoco
+import mujoco.batch
 import numpy as np
 import torch
 from rich.console import Console
@@ -32,35 +34,20 @@ from evo.robot import load_robot
 
 
 def raw_rate(env: ReachEnv, steps: int, rng: np.random.Generator) -> float:
-    """Env steps/s of bare ``mujoco.rollout`` on the env's model, arenas and threads."""
+    """Env steps/s of a bare ``mujoco.batch.Batch`` on the env's model, arenas, threads
+    and current states (one ``step`` call of ``frame_skip`` physics steps per control
+    step, as the env makes)."""
     core = env.core
-    n, k, nu = core.num_envs, core.task.frame_skip, core.model.nu
-    state = core.state.copy()
-    controls = rng.uniform(-1, 1, (steps, n, 1, nu)) * core.ctrl_scale
-    ctrl = np.zeros((n, k, nu))
-    out_state = np.zeros((n, k, core.nstate))
-    out_sensors = np.zeros((n, k, core.model.nsensordata))
-    warm = np.zeros((n, core.model.nv))
-    rollout = mujoco.rollout.Rollout(nthread=core.nthread)
-    datas = [mujoco.MjData(core.model) for _ in range(core.nthread)]
+    n, k = core.num_envs, core.task.frame_skip
+    batch = mujoco.batch.Batch(core.model, nsim=n, nthread=core.nthread, persistent=True)
+    batch.state[:] = core.state
+    ctrl = batch.bind("ctrl")
+    controls = rng.uniform(-1, 1, (steps, n, core.model.nu)) * core.ctrl_scale
     start = time.perf_counter()
     for t in range(steps):
         ctrl[:] = controls[t]
-        rollout.rollout(
-            core.models,
-            datas,
-            state,
-            ctrl,
-            nstep=k,
-            initial_warmstart=warm,
-            state=out_state,
-            sensordata=out_sensors,
-            skip_checks=True,
-        )
-        state[:] = out_state[:, -1]
-    elapsed = time.perf_counter() - start
-    rollout.close()
-    return n * steps / elapsed
+        batch.step(nstep=k)
+    return n * steps / (time.perf_counter() - start)
 
 
 def env_rate(env: ReachEnv, steps: int) -> float:

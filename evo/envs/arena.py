@@ -17,6 +17,8 @@ import numpy as np
 import numpy.typing as npt
 
 SHAPES = ("box", "sphere", "cylinder", "ellipsoid")
+ROCK_DRAWS = 512
+"""Draws a rock gets for a spot clear of the rocks placed before it."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -79,6 +81,9 @@ class ArenaParams:
         rock_spread: Rocks are scattered within this distance of the target, m.
         start_clearance: No rock centre closer than this to the arena centre, m.
         target_clearance: No rock centre closer than this to the target, m.
+        sleep: Let bodies at rest sleep (MuJoCo's sleeping islands): a rock that has
+            settled leaves the simulation, and its contacts with the floor, until
+            something awake touches it. The robot never sleeps (it has actuators).
     """
 
     side: float = 4.0
@@ -90,6 +95,7 @@ class ArenaParams:
     rock_spread: float = 0.6
     start_clearance: float = 0.35
     target_clearance: float = 0.12
+    sleep: bool = False
 
     def __post_init__(self) -> None:
         for key in ("side", "wall_height", "wall_thickness", "rock_density", "rock_spread"):
@@ -109,8 +115,8 @@ class ArenaParams:
 
     @classmethod
     def cluttered(cls) -> ArenaParams:
-        """Floor, walls and 40 rocks around the target."""
-        return cls(n_rocks=40)
+        """Floor, walls and 40 rocks around the target; settled rocks sleep."""
+        return cls(n_rocks=40, sleep=True)
 
     @property
     def rocks(self) -> tuple[RockType, ...]:
@@ -190,9 +196,11 @@ def scatter_rocks(
 
     Rocks lie within ``rock_spread`` of the target and inside the walls, never closer
     than ``start_clearance`` to the arena centre (where the robot starts) and at least
-    ``target_clearance`` from the target. They also avoid each other: each rock gets up
-    to 64 draws to find a free spot; when the neighbourhood is full it may touch
-    another rock, and the physics pushes them apart on the first step.
+    ``target_clearance`` from the target. They also avoid each other (bounding circles
+    apart): each rock gets up to :data:`ROCK_DRAWS` draws for a free spot and, should
+    the neighbourhood be that full, takes the draw that overlaps least. Rocks that
+    overlap are pushed apart by the physics at the start, which sets them rolling:
+    motion no robot caused.
 
     Returns:
         Positions ``(n_rocks, 3)`` and quaternions ``(n_rocks, 4)`` (w, x, y, z).
@@ -201,31 +209,45 @@ def scatter_rocks(
     radii = np.array([rock.radius for rock in rocks])
     pos = np.zeros((len(rocks), 3))
     for i, rock in enumerate(rocks):
-        for _ in range(64):
-            xy = _draw_near(params, rock, target, rng)
-            if np.all(np.hypot(*(pos[:i, :2] - xy).T) >= radii[:i] + rock.radius):
+        best, best_gap = np.zeros(2), -np.inf
+        for _ in range(ROCK_DRAWS // _BATCH):
+            spots = _spots_near(params, rock, target, rng)
+            gaps = (np.hypot(spots[:, None, 0] - pos[None, :i, 0],
+                             spots[:, None, 1] - pos[None, :i, 1])
+                    - radii[None, :i] - rock.radius).min(axis=1, initial=np.inf)
+            free = np.flatnonzero(gaps >= 0)
+            if len(free):
+                best = spots[free[0]]
                 break
-        pos[i] = (*xy, rock.half_height + 0.001)
+            if gaps.max() > best_gap:
+                best, best_gap = spots[int(np.argmax(gaps))], float(gaps.max())
+        pos[i] = (*best, rock.half_height + 0.001)
     yaw = rng.uniform(0, 2 * math.pi, size=len(rocks))
     zero = np.zeros(len(rocks))
     return pos, np.stack([np.cos(yaw / 2), zero, zero, np.sin(yaw / 2)], axis=1)
 
 
-def _draw_near(
+_BATCH = 32
+"""Candidate spots drawn at once."""
+
+
+def _spots_near(
     params: ArenaParams, rock: RockType, target: npt.NDArray[np.float64], rng: np.random.Generator
 ) -> npt.NDArray[np.float64]:
-    """One spot for ``rock`` near the target that meets the hard constraints."""
+    """:data:`_BATCH` spots for ``rock`` near the target, each meeting the hard
+    constraints (inside the walls, clear of the start and of the target)."""
     margin = params.side / 2 - params.wall_thickness / 2 - rock.radius
-    for _ in range(10_000):
-        r = params.rock_spread * math.sqrt(rng.random())
-        a = rng.uniform(0, 2 * math.pi)
-        xy = target[:2] + r * np.array([math.cos(a), math.sin(a)])
-        if (
-            np.abs(xy).max() <= margin
-            and math.hypot(*xy) >= params.start_clearance + rock.radius
-            and math.hypot(*(xy - target[:2])) >= params.target_clearance + rock.radius
-        ):
-            return xy
+    spots: list[npt.NDArray[np.float64]] = []
+    for _ in range(1000):
+        r = params.rock_spread * np.sqrt(rng.random(4 * _BATCH))
+        a = rng.uniform(0, 2 * math.pi, 4 * _BATCH)
+        xy = target[:2] + np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+        ok = ((np.abs(xy).max(axis=1) <= margin)
+              & (np.hypot(xy[:, 0], xy[:, 1]) >= params.start_clearance + rock.radius)
+              & (np.hypot(*(xy - target[:2]).T) >= params.target_clearance + rock.radius))
+        spots.append(xy[ok])
+        if sum(len(s) for s in spots) >= _BATCH:
+            return np.concatenate(spots)[:_BATCH]
     raise ValueError(
         f"no room for a rock within rock_spread={params.rock_spread} m of the target at "
         f"{target[:2].round(3).tolist()} outside start_clearance={params.start_clearance} m"

@@ -2,9 +2,12 @@
 
 ``ReachCore`` is the one implementation of the task: the TorchRL ``ReachEnv`` and the
 gymnasium ``ReachGymEnv`` are thin faces over it. All ``N`` arenas hold the same robot
-and advance together: one call of a persistent ``mujoco.rollout.Rollout`` steps every
-arena ``frame_skip`` physics steps in C on ``nthread`` threads, then observations and
-rewards are computed for all arenas at once with numpy.
+and advance together: one call of a persistent ``mujoco.batch.Batch`` (one ``MjData``
+per arena, kept between calls) steps every arena ``frame_skip`` physics steps in C on
+``nthread`` threads, then observations and rewards are computed for all arenas at once
+with numpy. Every control step starts the constraint solver cold (zero warm start), as
+a stateless rollout from the saved physics state would; the arenas' data persist so
+that resting rocks can sleep (``ArenaParams.sleep``).
 
 Observation (``9 + 2(m + n)`` values, ``+3`` with ``observe_up``), in this order:
 
@@ -42,7 +45,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
-import mujoco.rollout
+import mujoco.batch
 import numpy as np
 import numpy.typing as npt
 
@@ -53,7 +56,6 @@ from evo.robot.tree import Robot
 F64 = npt.NDArray[np.float64]
 Bools = npt.NDArray[np.bool_]
 REWARD_TERMS = ("time", "approach", "success")
-_FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,8 +144,8 @@ class _Tracer:
 
     def frame(self, terms: dict[str, float]) -> None:
         xpos, xquat = self.core.poses(0)
-        state = self.core.state[0]
-        self.frames.append((float(state[0]), xpos, xquat, self.core.qpos[0].copy(), terms))
+        self.frames.append((float(self.core.time[0]), xpos, xquat, self.core.qpos[0].copy(),
+                            terms))
 
     def finish(self, success: bool) -> None:
         if not self.frames:
@@ -179,6 +181,10 @@ def build_scene(
         body = root.find("worldbody")
         assert body is not None
         body.extend(list(world))
+        if arena.sleep:
+            option = root.find("option")
+            assert option is not None
+            ET.SubElement(option, "flag", sleep="enable")
 
     return build(robot, physics, scene=scene)
 
@@ -249,21 +255,22 @@ class ReachCore:
             dtype=np.intp,
         )
         self.target_mocap = int(m.body_mocapid[m.body("target").id])
-        self.nstate = mujoco.mj_stateSize(m, _FULL)
 
     def _allocate(self) -> None:
-        n, k, m = self.num_envs, self.task.frame_skip, self.model
+        n, m = self.num_envs, self.model
         self.scratch = mujoco.MjData(m)
-        self.rollout = mujoco.rollout.Rollout(nthread=self.nthread)
-        self.models = [m] * n
-        self.datas = [mujoco.MjData(m) for _ in range(self.nthread)]
-        self.warning_counts = [data.warning.number for data in self.datas]
-        self.state = np.zeros((n, self.nstate))
+        self.batch = mujoco.batch.Batch(m, nsim=n, nthread=self.nthread, persistent=True)
+        b = self.batch
+        # Live views of the arenas' state (writes take effect at the next step) ...
+        self.time, self.qpos, self.qvel = b.bind("time"), b.bind("qpos"), b.bind("qvel")
+        self.ctrl, self._warmstart = b.bind("ctrl"), b.bind("qacc_warmstart")
+        self._loaded = {f: b.bind(f) for f in ("act", "mocap_pos", "mocap_quat")}
+        # ... and outputs refreshed by every step (sensors of the state before the last
+        # physics step, as mj_step leaves them).
+        self._sensor_out = b.bind("sensordata")
+        self.warnings_seen = 0
+        self._diverged_seen = np.zeros(n, dtype=np.int64)  # per arena, see _diverged()
         self.sensordata = np.zeros((n, m.nsensordata))
-        self.ctrl = np.zeros((n, k, m.nu))
-        self.warmstart = np.zeros((n, m.nv))
-        self.state_out = np.zeros((n, k, self.nstate))
-        self.sensor_out = np.zeros((n, k, m.nsensordata))
         self.target = np.zeros((n, 3))
         self.action = np.zeros((n, m.nu))
         self.distance = np.zeros(n)
@@ -283,15 +290,11 @@ class ReachCore:
         return int(self.model.nu)
 
     @property
-    def qpos(self) -> F64:
-        """Joint positions of every arena, (N, nq): a view into the state (time, qpos, qvel...)."""
-        return self.state[:, 1 : 1 + self.model.nq]
-
-    @property
-    def qvel(self) -> F64:
-        """Joint velocities of every arena, (N, nv): a view into the state."""
-        nq = self.model.nq
-        return self.state[:, 1 + nq : 1 + nq + self.model.nv]
+    def state(self) -> F64:
+        """Every arena's integration state, (N, nstate): time, qpos, qvel, ... as
+        ``mjSTATE_INTEGRATION`` lays them out (``qpos``, ``qvel``, ``time`` are views)."""
+        state: F64 = self.batch.state
+        return state
 
     def watch(self, callback: Callable[[Trajectory], None] | None) -> None:
         """Trace every episode of arena 0 from its next reset; ``callback`` receives each
@@ -311,6 +314,8 @@ class ReachCore:
         """
         chosen = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         m, d = self.model, self.scratch
+        if len(chosen):  # a fresh MjData for each: awake, no history
+            self.batch.reset(chosen, stage=mujoco.mjtStage.mjSTAGE_NONE)
         for i in chosen:
             target = sample_target(self.rng, self.task.target_min, self.task.target_max)
             mujoco.mj_resetData(m, d)
@@ -320,7 +325,9 @@ class ReachCore:
                 d.qpos[self.rock_qpos[:, None] + np.arange(3, 7)] = quat
             d.mocap_pos[self.target_mocap] = target
             mujoco.mj_forward(m, d)
-            mujoco.mj_getState(m, d, self.state[i], _FULL)
+            self.time[i], self.qpos[i], self.qvel[i] = d.time, d.qpos, d.qvel
+            for field, view in self._loaded.items():
+                view[i] = getattr(d, field).reshape(view[i].shape)
             self.sensordata[i] = d.sensordata
             self.target[i] = target
         self.action[chosen] = 0.0
@@ -357,27 +364,23 @@ class ReachCore:
             raise ValueError(f"action: expected {self.num_envs} x {self.action_size} values "
                              f"(arenas x actuators), got shape {act.shape}")
         act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
-        self.ctrl[:] = (act * self.ctrl_scale)[:, None, :]
+        self.ctrl[:] = act * self.ctrl_scale
+        self._warmstart[:] = 0.0  # a cold solver start, as from a saved state
+        before = self.time.copy()
+        failed = np.zeros(self.num_envs, dtype=bool)
         tick = time.perf_counter()
-        self.rollout.rollout(
-            self.models,
-            self.datas,
-            self.state,
-            self.ctrl,
-            nstep=self.task.frame_skip,
-            initial_warmstart=self.warmstart,
-            state=self.state_out,
-            sensordata=self.sensor_out,
-            skip_checks=True,
-        )
+        try:
+            self.batch.step(nstep=self.task.frame_skip)
+        except mujoco.batch.SimulationError as err:  # MuJoCo gave up on those arenas
+            failed[np.asarray(err.ids, dtype=np.intp)] = True
         self.physics_seconds += time.perf_counter() - tick
         self._count_warnings()
         dt = self.model.opt.timestep * self.task.frame_skip
-        new_state, new_sensors = self.state_out[:, -1], self.sensor_out[:, -1]
-        unstable = ~np.isfinite(new_state).all(axis=1) | ~np.isfinite(new_sensors).all(axis=1)
-        unstable |= np.abs(new_state[:, 0] - self.state[:, 0] - dt) > 0.5 * self.model.opt.timestep
-        self.state[:] = new_state
-        self.sensordata[:] = new_sensors
+        self.sensordata[:] = self._sensor_out
+        unstable = failed | ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(self.qvel).all(
+            axis=1) | ~np.isfinite(self.sensordata).all(axis=1)
+        unstable |= np.abs(self.time - before - dt) > 0.5 * self.model.opt.timestep
+        unstable |= self._diverged()
         self.action[:] = act
         observation, distance = self._observe()
         stable = ~unstable
@@ -414,12 +417,22 @@ class ReachCore:
         )
 
     # ---- internals -----------------------------------------------------------------------
+    def _diverged(self) -> Bools:
+        """Arenas whose state MuJoCo found bad (NaN, Inf or huge qpos, qvel or qacc) and
+        reset during the last step: it carries on from the reset state, which only its
+        warning counters tell."""
+        bad = [mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+               mujoco.mjtWarning.mjWARN_BADQACC]
+        counts = self.batch.warning[:, [int(w) for w in bad], 1].sum(axis=1)
+        diverged: Bools = counts > self._diverged_seen
+        self._diverged_seen = counts.astype(np.int64)
+        return diverged
+
     def _count_warnings(self) -> None:
-        """Tally MuJoCo warnings raised in any arena since the last step, then clear them."""
-        for counts in self.warning_counts:
-            if counts.any():
-                self.warning_count += int(counts.sum())
-                counts[:] = 0
+        """Tally MuJoCo warnings raised in any arena since the last step."""
+        seen = int(self.batch.warning[..., 1].sum())
+        self.warning_count += max(0, seen - self.warnings_seen)
+        self.warnings_seen = seen
 
     def _observe(self) -> tuple[npt.NDArray[np.float32], F64]:
         """Observation and task distance d of every arena from the current sensors."""
@@ -464,7 +477,9 @@ class ReachCore:
         """World positions (nbody, 3) and quaternions (nbody, 4; w, x, y, z) of every body
         in ``arena``'s current state, target marker included (for recording and replay)."""
         m, d = self.model, self.scratch
-        mujoco.mj_setState(m, d, self.state[arena], _FULL)
+        d.qpos[:] = self.qpos[arena]
+        d.mocap_pos[:] = self._loaded["mocap_pos"][arena].reshape(d.mocap_pos.shape)
+        d.mocap_quat[:] = self._loaded["mocap_quat"][arena].reshape(d.mocap_quat.shape)
         d.mocap_pos[self.target_mocap] = self.target[arena]
         mujoco.mj_kinematics(m, d)
         return d.xpos.copy(), d.xquat.copy()
