@@ -61,7 +61,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
         nthread: int = 1,
         seed: int | None = None,
     ) -> None:
-        super().__init__(batch_size=torch.Size([num_envs]), device="cpu")
+        super().__init__(batch_size=torch.Size([num_envs]), device=None)
         self.core = ReachCore(robot, physics, arena, task, num_envs, nthread, seed)
         self.step_seconds = 0.0  # wall time inside _step, physics included
         n = num_envs

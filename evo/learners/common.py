@@ -17,6 +17,7 @@ from typing import Any, Protocol
 
 import pandas as pd
 import torch
+from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
@@ -166,22 +167,37 @@ class GaussianHead(nn.Module):
 
 class GaussianSampler(nn.Module):
     """The actor's random action and its log-probability in one call: what a collector
-    needs, without building a distribution object and its TensorDicts every step (the
-    loss still reads the policy through the ``ProbabilisticActor``)."""
+    needs, without building a distribution object every step (the loss still reads the
+    policy through the ``ProbabilisticActor``).
+
+    It reads ``observation`` from a TensorDict and writes ``loc``, ``scale``,
+    ``action`` and ``action_log_prob`` into it, as the ``ProbabilisticActor`` would,
+    with four plain ``set`` calls instead of a ``TensorDictModule``'s key bookkeeping
+    (a collector calls it once per control step).
+    """
 
     def __init__(self, head: GaussianHead) -> None:
         super().__init__()
         self.head = head
 
-    def forward(
+    def sample(
         self, observation: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean, scale, a random action and its log-probability."""
         loc, scale = self.head(observation)
         noise = torch.randn_like(loc)
         action = loc + scale * noise
         # log N(action; loc, scale), summed over the independent action dimensions.
         log_prob = (-0.5 * noise**2 - scale.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
         return loc, scale, action, log_prob
+
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        loc, scale, action, log_prob = self.sample(tensordict.get("observation"))
+        tensordict.set("loc", loc)
+        tensordict.set("scale", scale)
+        tensordict.set("action", action)
+        tensordict.set("action_log_prob", log_prob)
+        return tensordict
 
 
 class ValueHead(nn.Module):
@@ -217,13 +233,9 @@ class Policy:
         loc: torch.Tensor = self.head(observation)[0]
         return loc
 
-    def sampler(self) -> TensorDictModule:
-        """The exploring actor for collectors (``GaussianSampler``; shares the weights)."""
-        return TensorDictModule(
-            GaussianSampler(self.head),
-            in_keys=["observation"],
-            out_keys=["loc", "scale", "action", "action_log_prob"],
-        )
+    def sampler(self) -> GaussianSampler:
+        """The exploring actor for collectors (shares the weights)."""
+        return GaussianSampler(self.head)
 
     def state_dict(self) -> dict[str, Any]:
         """Everything a checkpoint needs (tensors and plain numbers only)."""
