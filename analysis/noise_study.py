@@ -52,6 +52,10 @@ SETTINGS: dict[str, tuple[str, ...]] = {
     # The learner defaults' 32 arenas x 64 steps and 50 s episodes, a faster learner:
     # Adam 1e-3, minibatches of 1,024.
     "lr1e-3": ("learner.lr=1e-3", "learner.minibatch_size=1024"),
+    # The learner defaults with 8 epochs per batch (twice the gradient steps).
+    "ep8": ("learner.epochs=8",),
+    # The learner defaults with a slower learner: Adam 1e-4.
+    "lr1e-4": ("learner.lr=1e-4",),
 }
 """Named settings: config overrides on top of the defaults (``record=off`` is added)."""
 

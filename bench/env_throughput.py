@@ -74,7 +74,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats, best kept")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    table = Table(title="ReachEnv throughput (env steps/s) vs raw MuJoCo rollout, same run")
+    table = Table(title="ReachEnv throughput (env steps/s) vs raw MuJoCo batch, same run")
     for column in ("robot", "arena", "N", "threads", "raw", "env", "env/raw"):
         table.add_column(column, justify="right")
     rng = np.random.default_rng(0)

@@ -6,7 +6,7 @@ overrides, and any Hydra overrides given on the command line) for ``--steps`` en
 on ``--nthread`` physics threads and prints, from the same run:
 
 * env steps/s end to end (collection + GAE + update + curve bookkeeping);
-* the split of wall time: physics (inside ``mujoco.rollout``), env (the rest of the
+* the split of wall time: physics (inside ``mujoco.batch``), env (the rest of the
   environment's step: observations, rewards, TensorDicts), policy and collector (the
   rest of collection), update (GAE, PPO epochs, statistics);
 * the raw physics rate of the same compiled model, N arenas, same threads and frame

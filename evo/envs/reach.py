@@ -2,7 +2,7 @@
 
 One ``ReachEnv`` holds ``num_envs`` arenas of one robot in one process
 (``batch_size=[num_envs]``); the physics of all arenas advances in one
-``mujoco.rollout`` call per control step (see ``evo.envs.task``). Besides
+``mujoco.batch.Batch`` call per control step (see ``evo.envs.task``). Besides
 ``observation``, ``reward`` and the done flags, every step carries
 
 * ``reward_terms/<name>``: each named reward term (they sum to ``reward``);
