@@ -47,9 +47,7 @@ twice.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -63,54 +61,22 @@ from numpy.typing import ArrayLike, NDArray
 from analysis.bootstrap import Statistic, bootstrap_ci, resampling_units
 from analysis.population import population_trace
 from analysis.tables import CURVE_COLUMNS, require_columns
+from evo.early_rejection import (  # noqa: F401 - the predictors, shared with the GA
+    RATE_BOUNDS,
+    SLOPE_STEPS,
+    Curve,
+    late_slope,
+    prefix_area,
+    saturating,
+    saturating_extrapolation,
+    value_at_cut,
+)
 
 FRACTIONS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.5, 0.75)
 PREDICTORS: tuple[str, ...] = ("value", "slope", "area", "curve", "value+slope")
 TARGETS: tuple[str, ...] = ("fitness", "after_cut")
-SLOPE_STEPS = 1_000
-"""The slope predictor is in return per this many env steps."""
-RATE_BOUNDS = (0.1, 100.0)
-"""Bounds of the saturating curve's rate ``c`` (per budget): from nearly linear over the
-whole budget to saturated within its first percent."""
 
 # ---------------------------------------------------------------- one robot's curve
-
-
-@dataclass(frozen=True)
-class Curve:
-    """One robot's informative batches (those that completed episodes), in step order."""
-
-    steps: NDArray[np.float64]
-    returns: NDArray[np.float64]
-    episodes: NDArray[np.float64]
-
-    @classmethod
-    def from_rows(cls, rows: pd.DataFrame) -> Curve:
-        """Build from one robot's rows of a curves table, dropping uninformative batches."""
-        done = rows[(rows["episodes"] > 0) & np.isfinite(rows["mean_return"])]
-        done = done.sort_values("env_steps")
-        return cls(done["env_steps"].to_numpy(dtype=float),
-                   done["mean_return"].to_numpy(dtype=float),
-                   done["episodes"].to_numpy(dtype=float))
-
-    def select(self, mask: NDArray[np.bool_]) -> Curve:
-        """The batches where ``mask`` holds."""
-        return Curve(self.steps[mask], self.returns[mask], self.episodes[mask])
-
-    def prefix(self, cut: float) -> Curve:
-        """The batches at or before ``cut`` env steps."""
-        return self.select(self.steps <= cut)
-
-    def after(self, cut: float) -> Curve:
-        """The batches after ``cut`` env steps."""
-        return self.select(self.steps > cut)
-
-    def episode_mean(self) -> float:
-        """Mean return over all episodes of these batches; NaN when there are none."""
-        if self.episodes.sum() <= 0:
-            return np.nan
-        return float(np.average(self.returns, weights=self.episodes))
-
 
 def curve_fitness(curves: pd.DataFrame) -> pd.Series:
     """The paper's fitness (Eq. 8) of every robot, recomputed from its curve.
@@ -125,95 +91,6 @@ def curve_fitness(curves: pd.DataFrame) -> pd.Series:
     done = curves[(curves["episodes"] > 0) & np.isfinite(curves["mean_return"])]
     totals = (done["mean_return"] * done["episodes"]).groupby([done["run"], done["name"]])
     return (totals.sum() / done.groupby(["run", "name"])["episodes"].sum()).rename("fitness")
-
-
-def value_at_cut(prefix: Curve, last: int = 3) -> float:
-    """Episode-weighted mean return of the last ``last`` batches of ``prefix``."""
-    return prefix.select(np.arange(len(prefix.steps)) >= len(prefix.steps) - last).episode_mean()
-
-
-def late_slope(prefix: Curve, cut: float) -> float:
-    """Theil–Sen slope over the second half of the prefix, per :data:`SLOPE_STEPS` steps.
-
-    Returns:
-        The slope, or NaN with fewer than two distinct step counts in that half.
-    """
-    half = prefix.select(prefix.steps >= cut / 2)
-    if len(np.unique(half.steps)) < 2:
-        return np.nan
-    return float(scipy.stats.theilslopes(half.returns, half.steps).slope) * SLOPE_STEPS
-
-
-def prefix_area(prefix: Curve) -> float:
-    """Trapezoidal area under the prefix over its span (its time-averaged return)."""
-    if len(prefix.steps) == 0:
-        return np.nan
-    span = prefix.steps[-1] - prefix.steps[0]
-    if span == 0:
-        return float(prefix.returns.mean())
-    return float(scipy.integrate.trapezoid(prefix.returns, prefix.steps) / span)
-
-
-def saturating(tau: ArrayLike, a: float, b: float, c: float) -> Any:
-    """The saturating curve ``a − b·exp(−c·τ)``."""
-    return a - b * np.exp(-c * np.asarray(tau, dtype=float))
-
-
-def _saturating_jacobian(tau: ArrayLike, a: float, b: float, c: float) -> Any:
-    e = np.exp(-c * np.asarray(tau, dtype=float))
-    return np.column_stack([np.ones_like(e), -e, b * np.asarray(tau) * e])
-
-
-def _grid_fit(tau: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Least-squares ``(a, b, c)`` with ``c`` on a log grid over :data:`RATE_BOUNDS`.
-
-    For a fixed ``c`` the curve is linear in ``a`` and ``b``, so every grid point is a
-    two-column least-squares problem; the best one starts :func:`curve_fit`, which
-    then cannot wander off into a poor local minimum.
-    """
-    rates = np.geomspace(*RATE_BOUNDS, 64)
-    best: tuple[float, NDArray[np.float64]] = (np.inf, np.array([y.mean(), 0.0, 1.0]))
-    for c in rates:
-        design = np.column_stack([np.ones_like(tau), -np.exp(-c * tau)])
-        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-        sse = float(np.sum((design @ coef - y) ** 2))
-        if sse < best[0]:
-            best = (sse, np.array([coef[0], coef[1], c]))
-    return best[1]
-
-
-def saturating_extrapolation(prefix: Curve, budget: float, fallback: float) -> float:
-    """Fit :func:`saturating` to the prefix and evaluate it at the full budget.
-
-    The fit starts from :func:`_grid_fit` and refines with
-    :func:`scipy.optimize.curve_fit` under a soft-L1 loss whose scale is the grid fit's
-    robust residual spread; if the refinement fails the grid fit is used.
-
-    Args:
-        prefix: Informative prefix of one robot's curve.
-        budget: The robot's env-step budget (``τ = env_steps / budget``).
-        fallback: Returned when there are fewer than four points.
-
-    Returns:
-        The extrapolated mean return at ``τ = 1``.
-    """
-    tau, y = prefix.steps / budget, prefix.returns
-    if len(tau) < 4 or np.ptp(tau) == 0:
-        return fallback
-    params = _grid_fit(tau, y)
-    spread = 1.4826 * np.median(np.abs(saturating(tau, *params) - y))
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", scipy.optimize.OptimizeWarning)
-            params, _ = scipy.optimize.curve_fit(
-                saturating, tau, y, p0=params, jac=_saturating_jacobian,
-                bounds=([-np.inf, -np.inf, RATE_BOUNDS[0]], [np.inf, np.inf, RATE_BOUNDS[1]]),
-                loss="soft_l1", f_scale=max(float(spread), 1e-9), max_nfev=200,
-            )
-    except (RuntimeError, ValueError, np.linalg.LinAlgError):
-        pass
-    value = float(saturating(1.0, *params))
-    return value if np.isfinite(value) else fallback
 
 
 def robot_predictors(curve: Curve, budget: float, fraction: float, *,

@@ -38,7 +38,7 @@ from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
 from analysis.report import parser, report_folder
-from analysis.tables import method_order
+from analysis.tables import fully_trained, method_order
 
 REPORT = "early_slope.md"
 SCATTER_FRACTION = 0.2
@@ -80,7 +80,7 @@ def study_robots(robots: pd.DataFrame,
     Returns:
         The robots, their methods and a note saying which were taken.
     """
-    scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    scored = fully_trained(robots)
     present = method_order(scored["method"])
     if methods is not None:
         chosen = [m for m in method_order(methods) if m in present]
@@ -92,6 +92,10 @@ def study_robots(robots: pd.DataFrame,
             chosen = present
             note = ("No learned method (R+L, E+L) in the input: every robot is studied, "
                     "though random-policy curves carry no learning signal.")
+    stopped = int((robots["status"] == "stopped-early").sum()) if "status" in robots else 0
+    if stopped:
+        note += (f" {stopped} robot(s) stopped early by early rejection left out: their "
+                 "curves end before the cuts a prediction is scored against.")
     return scored[scored["method"].isin(chosen)], chosen, note
 
 

@@ -57,8 +57,11 @@ DEFAULT_POPULATION = 20
 """``ga.population_size`` of the GA config, for a config that does not say."""
 EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
     "scheduled_budget", "operator", "replaced", "episodes", "wall_seconds", "error",
-    "eval_seed", "curve_source",
+    "eval_seed", "status", "predicted", "curve_source",
 )
+"""``status``: ``trained``, ``stopped-early`` (early rejection: its fitness covers part of
+its budget) or ``failed``, from history.csv (derived from ``error`` for runs recorded
+before the column existed); ``predicted``: the rule's prediction for a stopped robot."""
 RUN_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "population_size", "robots", "complete", "status",
     "curves_mcap", "curves_csv", "curves_missing", "path",
@@ -258,6 +261,9 @@ def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd
         "wall_seconds": number("wall_seconds"),
         "error": text("error"),
         "eval_seed": number("seed"),
+        "status": text("status").where(text("status") != "", np.where(
+            text("error") != "", "failed", "trained")),
+        "predicted": number("predicted"),
     })
     return table.sort_values("birth").reset_index(drop=True)
 

@@ -39,7 +39,7 @@ from matplotlib.figure import Figure
 from analysis import plots, stats
 from analysis.load import RunDirectoryError, Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
-from analysis.tables import METHODS, method_order
+from analysis.tables import METHODS, fully_trained, method_order
 
 REPORT = "report.md"
 LEARNING_CURVES = 8
@@ -109,18 +109,22 @@ def ablation_tables(
     Raises:
         ValueError: If no robot has a fitness.
     """
-    scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    scored = fully_trained(robots)
     if scored.empty:
-        raise ValueError(f"no robot with a fitness among {len(robots)} robots")
+        raise ValueError(f"no fully trained robot with a fitness among {len(robots)} robots")
     present = method_order(scored["method"])
     missing = [m for m in METHODS if m not in present]
     notes = []
     if missing:
         notes.append(f"Methods missing from the input: {', '.join(missing)}; the tests "
                      "and contrasts that need them are left out.")
-    left_out = len(robots) - len(scored)
+    stopped = int((robots["status"] == "stopped-early").sum()) if "status" in robots else 0
+    left_out = len(robots) - len(scored) - stopped
     if left_out:
         notes.append(f"{left_out} robot(s) without a fitness (failed evaluation) left out.")
+    if stopped:
+        notes.append(f"{stopped} robot(s) stopped early by early rejection left out of the "
+                     "fitness statistics: their fitness covers only part of a budget.")
     summary = stats.summarize(scored, rng, k=k, confidence=confidence,
                               n_resamples=n_resamples)
     kruskal, pairwise = _tests(scored, None, notes)
@@ -235,7 +239,7 @@ def ablation_figures(
         return None if folder is None else folder / f"{stem}.png"
 
     figures: dict[str, Figure] = {}
-    scored = robots[np.isfinite(robots["fitness"].to_numpy(dtype=float))]
+    scored = fully_trained(robots)
     others = [m for m in method_order(scored["method"]) if m != "R+R"]
     if others:
         figures["fitness_vs_RR"] = plots.plot_against_baseline(

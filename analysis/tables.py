@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+import numpy as np
 import pandas as pd
 
 METHODS: tuple[str, ...] = ("R+R", "R+L", "E+R", "E+L")
@@ -83,3 +84,12 @@ def method_order(methods: Iterable[str]) -> list[str]:
     """The distinct ``methods`` in :data:`METHODS` order, unknown ones after, sorted."""
     present = set(methods)
     return [m for m in METHODS if m in present] + sorted(present - set(METHODS))
+
+
+def fully_trained(robots: pd.DataFrame) -> pd.DataFrame:
+    """The robots with a fitness from their whole budget: neither failed nor stopped
+    early by early rejection (whose fitness covers only part of a budget, and which the
+    fitness statistics leave out and say so)."""
+    finite = np.isfinite(robots["fitness"].to_numpy(dtype=float))
+    stopped = (robots["status"] == "stopped-early") if "status" in robots else False
+    return robots[finite & ~np.asarray(stopped, dtype=bool)]

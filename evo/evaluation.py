@@ -8,14 +8,18 @@ error, and the evolution loop records it and goes on.
 from __future__ import annotations
 
 import dataclasses
+import json
+import math
 import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from evo.components.executors import EvalExecutor
+from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.task import EnvConfig, Trajectory, build_scene
 from evo.learners.common import LearnerConfig, get_learner, save_checkpoint
 from evo.learners.rollouts import play
@@ -39,6 +43,8 @@ class Job:
     timeout_s: float = 0.0
     """Wall-clock limit of one evaluation in seconds, checked after every collector
     batch (0 = none); an evaluation past it stops with an ``EvaluationTimeout`` error."""
+    early: EarlyRejection = field(default_factory=EarlyRejection)
+    """When an offspring's training may stop early (``ga.early_rejection``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +59,8 @@ class Task:
         seed: The evaluation's own seed.
         parents: Names of the parents (empty for random robots).
         operator: How the robot was made (random, crossover, ...).
+        threshold: The population minimum it must beat to enter the population (NaN
+            when it enters anyway, an initial robot, or early rejection is off).
     """
 
     birth: int
@@ -62,6 +70,7 @@ class Task:
     seed: int
     parents: tuple[str, ...] = ()
     operator: str = "random"
+    threshold: float = float("nan")
 
 
 class EvaluationTimeout(RuntimeError):
@@ -80,6 +89,11 @@ class Outcome:
     wall_seconds: float = 0.0
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
+    stopped_early: bool = False
+    """Training stopped at a checkpoint: the offspring cannot enter the population;
+    ``fitness`` is Eq. 8 over the episodes it completed."""
+    predicted: float = float("nan")
+    """The early-rejection rule's last prediction of the final fitness."""
 
 
 def outcome_of(future: Future[Outcome], task: Task, executor: EvalExecutor) -> Outcome:
@@ -136,7 +150,6 @@ def to_episode(trajectory: Trajectory, index: int, env_step: int) -> Episode:
 def evaluate(task: Task, job: Job) -> Outcome:
     """Train ``task``'s robot for its budget; write ``evals/<name>.pt``, ``.csv`` and the
     recordings (``.mcap``, ``.rrd``) the record config asks for."""
-    import json
 
     start = time.perf_counter()
     try:
@@ -157,9 +170,12 @@ def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outco
         "method": job.method, "birth": task.birth, "budget": task.budget,
         "parents": list(task.parents), "replay_seed": task.seed,
     }
+    rule = (StoppingRule(job.early, task.budget, _population_minimum(Path(job.run_dir),
+                                                                     task.threshold))
+            if job.early.enabled and math.isfinite(task.threshold) else None)
     with open_recorder(job.record, evals, task.name, model, metadata) as recorder:
 
-        def on_curve(row: dict[str, float]) -> None:
+        def on_curve(row: dict[str, float]) -> bool:
             recorder.curve(row)
             elapsed = time.perf_counter() - start
             if job.timeout_s > 0 and elapsed > job.timeout_s:
@@ -167,6 +183,7 @@ def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outco
                     f"{task.name}: timed out after {elapsed:.1f} s at {row['env_steps']:.0f} "
                     f"of {task.budget} env steps (ga.eval_timeout_s = {job.timeout_s:g})"
                 )
+            return rule is not None and rule(row)
 
         sampler = EpisodeSampler(recorder, job.record)
         result = get_learner(job.learner)(
@@ -181,7 +198,26 @@ def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outco
             recorder.episode(to_episode(final, sampler.count, result.env_steps))
         result.curve.to_csv(evals / f"{task.name}.csv", index=False)
         save_checkpoint(result.policy, evals / f"{task.name}.pt", job.learner, robot=robot.hash)
+        predicted = rule.predicted if rule is not None else float("nan")
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
-                        "episodes": result.episodes, "status": "complete"})
+                        "episodes": result.episodes, "predicted": predicted,
+                        "status": "stopped-early" if result.stopped_early else "complete"})
     return Outcome(task.birth, task.name, fitness=result.fitness, env_steps=result.env_steps,
-                   episodes=result.episodes, extra={"unstable": float(result.unstable)})
+                   episodes=result.episodes, extra={"unstable": float(result.unstable)},
+                   stopped_early=result.stopped_early, predicted=predicted)
+
+
+def _population_minimum(run_dir: Path, at_breeding: float) -> Callable[[], float]:
+    """The population minimum an offspring must beat: the one it was bred against, or
+    the current one from ``population.json`` when this process can read it (a local
+    executor shares the run directory; the population only improves)."""
+
+    def current() -> float:
+        try:
+            population = json.loads((run_dir / "population.json").read_text())["population"]
+            now = min(float(m["fitness"]) for m in population)
+        except (OSError, ValueError, KeyError, TypeError):
+            return at_breeding
+        return max(now, at_breeding) if math.isfinite(at_breeding) else at_breeding
+
+    return current

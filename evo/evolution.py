@@ -69,8 +69,13 @@ HISTORY_COLUMNS = (
     "error",
     "population_best",
     "population_mean",
+    "status",
+    "predicted",
 )
-"""The columns of history.csv, in order (one row per evaluated robot)."""
+"""The columns of history.csv, in order (one row per evaluated robot). ``status`` is
+``trained`` (its whole budget), ``stopped-early`` (early rejection stopped it: it never
+enters the population; ``fitness`` is Eq. 8 over the episodes it completed and
+``predicted`` the rule's prediction) or ``failed``."""
 RANDOM_FALLBACK = "random-fallback"
 """History ``operator`` of a random robot made because breeding found no valid child."""
 
@@ -199,6 +204,9 @@ class Evolution:
         save_robot(offspring.robot, self.run_dir / "robots" / f"{name}.json")
         self.next_birth += 1
         budget = self.schedule.budget(birth, self.ga.population_size, self.ga.robot_budget)
+        full = len(self.population) >= self.ga.population_size
+        threshold = (min(m.fitness for m in self.population)
+                     if self.job.early.enabled and full else math.nan)
         return Task(
             birth,
             name,
@@ -207,12 +215,13 @@ class Evolution:
             evaluation_seed(self.seed, birth),
             offspring.parents,
             offspring.operator,
+            threshold,
         )
 
     def _record(self, task: Task, outcome: Outcome) -> None:
         """Apply replacement, append the history row, save the state."""
         accepted, replaced = False, ""
-        if outcome.error is None and math.isfinite(outcome.fitness):
+        if outcome.error is None and math.isfinite(outcome.fitness) and not outcome.stopped_early:
             member = Member(task.name, load_robot(self._robot_path(task.name)), outcome.fitness)
             if not task.parents and len(self.population) < self.ga.population_size:
                 self.population.append(member)
@@ -238,6 +247,9 @@ class Evolution:
             "error": outcome.error or "",
             "population_best": max(fitness) if fitness else math.nan,
             "population_mean": float(np.mean(fitness)) if fitness else math.nan,
+            "status": ("failed" if outcome.error is not None
+                       else "stopped-early" if outcome.stopped_early else "trained"),
+            "predicted": outcome.predicted,
         }
         self.history.append(row)
         self.pending = [t for t in self.pending if t.birth != task.birth]
@@ -290,13 +302,15 @@ class Evolution:
     def summary(self) -> dict[str, Any]:
         """Robots evaluated, the best robot, env steps and speed so far."""
         done = [r for r in self.history if not r["error"]]
+        trained = [r for r in done if r.get("status") != "stopped-early"]
         # A robot none of whose episodes ended has only a provisional fitness (the mean
         # return of its unfinished episodes): it is named best only if no robot is better
-        # placed, and then with a note.
-        finished = [r for r in done if r["episodes"] > 0]
-        best = max(finished or done, key=lambda r: r["fitness"], default=None)
+        # placed, and then with a note. A robot stopped early is never named best.
+        finished = [r for r in trained if r["episodes"] > 0]
+        best = max(finished or trained, key=lambda r: r["fitness"], default=None)
         initial = [r["fitness"] for r in done if not r["parents"]]
         steps = int(sum(r["env_steps"] for r in self.history))
+        stopped = [r for r in self.history if r.get("status") == "stopped-early"]
         return {
             "method": self.job.method,
             "robots_evaluated": len(self.history),
@@ -312,6 +326,8 @@ class Evolution:
             "wall_seconds": self.wall_seconds,
             "steps_per_second": steps / max(self.wall_seconds, 1e-9),
             "complete": len(self.history) >= self.ga.robot_budget,
+            "stopped_early": len(stopped),
+            "env_steps_saved": int(sum(max(0, r["budget"] - r["env_steps"]) for r in stopped)),
             "best_note": (
                 "no robot finished an episode within its budget: the best fitness is the "
                 "mean return of unfinished episodes" if best and not finished else ""),
@@ -398,7 +414,8 @@ class RunLog:
     """Mirrors the run into ``run.mcap`` and ``run.rrd`` (``evo.record.RunRecorder``):
     every history row as a birth, and at the end the best robots' geometry."""
 
-    EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error")
+    EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error",
+             "status")
 
     def __init__(self, run_dir: Path, record: RecordConfig, metadata: dict[str, Any]) -> None:
         self.run_dir = run_dir
@@ -410,7 +427,7 @@ class RunLog:
             self.recorder.birth(Birth(
                 int(row["birth"]), str(row["name"]), float(row["fitness"]), bool(row["accepted"]),
                 float(row["population_best"]), float(row["population_mean"]),
-                extra={k: row[k] for k in self.EXTRA},
+                extra={k: row.get(k, "") for k in self.EXTRA},
             ))
 
     def close(self, history: list[dict[str, Any]], physics: PhysicsParams, top: int = 5,

@@ -37,6 +37,7 @@ from evo.components.ga import (
     StructureStrategy,
 )
 from evo.config import ConfigError, instantiate, typed
+from evo.early_rejection import EarlyRejection
 from evo.edge import (
     executor_of,
     generator_of,
@@ -130,6 +131,7 @@ GA_KEYS = frozenset(
         "mutation_rate",
         "mutation_operators",
         "eval_timeout_s",
+        "early_rejection",
     }
 )
 """Every key of the ``ga`` group (conf/ga/steady_state.yaml)."""
@@ -195,9 +197,10 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     sizes = ("population_size", "robot_budget", "eval_timeout_s")
     ga = typed(GAConfig, {k: cfg.ga[k] for k in sizes if k in cfg.ga}, "ga")
     method = method_label(strategy.code, learner.update)
+    early = typed(EarlyRejection, cfg.ga.get("early_rejection"), "ga.early_rejection")
     job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-              timeout_s=ga.eval_timeout_s)
+              timeout_s=ga.eval_timeout_s, early=early)
     replacement = instantiate(cfg.ga.replacement, "ga.replacement")
     if not isinstance(replacement, ReplaceWorst):
         raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")

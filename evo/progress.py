@@ -59,9 +59,14 @@ class EvolutionProgress:
 
     def line(self, row: dict[str, Any]) -> str:
         """The plain progress line of one evaluated robot."""
-        outcome = (f"failed ({str(row['error']).strip().splitlines()[-1][:80]})" if row["error"]
-                   else f"fitness {row['fitness']:+.4f} "
-                        f"{'accepted' if row['accepted'] else 'rejected'}")
+        if row["error"]:
+            outcome = f"failed ({str(row['error']).strip().splitlines()[-1][:80]})"
+        elif row.get("status") == "stopped-early":
+            outcome = (f"stopped early at {row['env_steps']:,} of {row['budget']:,} env steps "
+                       f"(predicted {row['predicted']:+.4f}, fitness so far {row['fitness']:+.4f})")
+        else:
+            outcome = (f"fitness {row['fitness']:+.4f} "
+                       f"{'accepted' if row['accepted'] else 'rejected'}")
         best = row["population_best"]
         return (f"{self.method} birth {row['birth']} {row['name']}: {outcome}; best "
                 f"{best:+.4f} | {len(self.done)}/{len(self.budgets)} robots | ETA {self.eta()}")

@@ -275,6 +275,7 @@ class TrainResult:
         wall_seconds: Wall time of the run.
         unstable: Episodes ended by a numerical blow-up.
         timing: Seconds spent in physics, the rest of the env, policy and update.
+        stopped_early: The curve hook stopped training before the budget was spent.
     """
 
     fitness: float
@@ -285,6 +286,7 @@ class TrainResult:
     wall_seconds: float
     unstable: int = 0
     timing: dict[str, float] = field(default_factory=dict)
+    stopped_early: bool = False
 
     @property
     def steps_per_second(self) -> float:
@@ -367,7 +369,7 @@ class Learner(Protocol):
         config: LearnerConfig,
         budget: int,
         seed: int,
-        on_curve: Callable[[dict[str, float]], None] | None = None,
+        on_curve: Callable[[dict[str, float]], bool | None] | None = None,
         on_episode: Callable[[Trajectory, int], None] | None = None,
     ) -> TrainResult: ...
 

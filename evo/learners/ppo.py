@@ -42,8 +42,9 @@ from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
-CurveHook = Callable[[dict[str, float]], None]
-"""Called with every learning-curve row as soon as it exists (recorders, progress)."""
+CurveHook = Callable[[dict[str, float]], bool | None]
+"""Called with every learning-curve row as soon as it exists (recorders, progress, early
+rejection); returning True asks training to stop after this batch."""
 EpisodeHook = Callable[[Trajectory, int], None]
 """Called with every finished episode of arena 0 and the env-step count at its end."""
 
@@ -120,7 +121,8 @@ def train(
 
     Randomness comes only from ``seed`` (targets, rocks, network initialisation, action
     noise, minibatch order); torch's global generator is left as it was. ``on_curve``
-    gets every curve row, ``on_episode`` every episode of arena 0 frame by frame.
+    gets every curve row (and stops training after a batch when it returns True),
+    ``on_episode`` every episode of arena 0 frame by frame.
     """
     if budget < 1:
         raise ValueError(f"budget must be >= 1 env step, got {budget}")
@@ -165,6 +167,7 @@ def _train(
     )
     rows: list[dict[str, float]] = []
     returns_sum, returns_count, steps = 0.0, 0, 0
+    stopped = False
     timing = dict.fromkeys(("collect", "update"), 0.0)
     tick = time.perf_counter()
     try:
@@ -182,10 +185,12 @@ def _train(
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
-            if on_curve is not None:
-                on_curve(row)
+            stop = on_curve is not None and bool(on_curve(row))
             timing["update"] += time.perf_counter() - tick
             tick = time.perf_counter()
+            if stop and steps < frames:  # a stop asked at the last batch changes nothing
+                stopped = True
+                break
     finally:
         collector.shutdown()
     # When no episode ended within the budget, judge the running ones.
@@ -200,6 +205,7 @@ def _train(
         wall_seconds=time.perf_counter() - start,
         unstable=env.core.unstable_count,
         timing=timing,
+        stopped_early=stopped,
     )
 
 

@@ -1,0 +1,294 @@
+"""Early rejection (SPEC §5 extension, paper §8–§9): stop training an offspring whose
+learning curve says it cannot enter the population.
+
+In the steady-state GA an offspring matters only if its fitness beats the population's
+minimum (replace-worst-if-better). :class:`EarlyRejection` (``ga.early_rejection``) sets
+checkpoints (fractions of the offspring's budget), a predictor and a margin; at each
+checkpoint :class:`StoppingRule` predicts the offspring's final fitness from its curve
+so far and asks training to stop when ``prediction + margin`` is below the minimum it
+has to beat. It is off in every paper config.
+
+The predictors are the early-slope study's (``analysis.early_slope``, which imports
+them from here), computed from a curve's informative batches (those that completed
+episodes):
+
+* ``value``: mean return of the episodes of the last ``last`` informative batches;
+* ``area``: the prefix's time-averaged return (trapezoidal area over its span);
+* ``curve``: ``a − b·exp(−c·τ)`` (``τ = env_steps / budget``) fitted to the prefix and
+  evaluated at ``τ = 1``;
+* ``slope``: Theil–Sen slope of the second half of the prefix (per 1,000 env steps; not
+  on the return scale, so no rule uses it alone).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import scipy.integrate
+import scipy.optimize
+import scipy.stats
+from numpy.typing import ArrayLike, NDArray
+
+SLOPE_STEPS = 1_000
+"""The slope predictor is in return per this many env steps."""
+RATE_BOUNDS = (0.1, 100.0)
+"""Bounds of the saturating curve's rate ``c`` (per budget): from nearly linear over the
+whole budget to saturated within its first percent."""
+
+# ---------------------------------------------------------------- one robot's curve
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One robot's informative batches (those that completed episodes), in step order."""
+
+    steps: NDArray[np.float64]
+    returns: NDArray[np.float64]
+    episodes: NDArray[np.float64]
+
+    @classmethod
+    def from_rows(cls, rows: pd.DataFrame) -> Curve:
+        """Build from one robot's rows of a curves table, dropping uninformative batches."""
+        done = rows[(rows["episodes"] > 0) & np.isfinite(rows["mean_return"])]
+        done = done.sort_values("env_steps")
+        return cls(done["env_steps"].to_numpy(dtype=float),
+                   done["mean_return"].to_numpy(dtype=float),
+                   done["episodes"].to_numpy(dtype=float))
+
+    def select(self, mask: NDArray[np.bool_]) -> Curve:
+        """The batches where ``mask`` holds."""
+        return Curve(self.steps[mask], self.returns[mask], self.episodes[mask])
+
+    def prefix(self, cut: float) -> Curve:
+        """The batches at or before ``cut`` env steps."""
+        return self.select(self.steps <= cut)
+
+    def after(self, cut: float) -> Curve:
+        """The batches after ``cut`` env steps."""
+        return self.select(self.steps > cut)
+
+    def episode_mean(self) -> float:
+        """Mean return over all episodes of these batches; NaN when there are none."""
+        if self.episodes.sum() <= 0:
+            return np.nan
+        return float(np.average(self.returns, weights=self.episodes))
+
+
+def value_at_cut(prefix: Curve, last: int = 3) -> float:
+    """Episode-weighted mean return of the last ``last`` batches of ``prefix``."""
+    return prefix.select(np.arange(len(prefix.steps)) >= len(prefix.steps) - last).episode_mean()
+
+
+def late_slope(prefix: Curve, cut: float) -> float:
+    """Theil–Sen slope over the second half of the prefix, per :data:`SLOPE_STEPS` steps.
+
+    Returns:
+        The slope, or NaN with fewer than two distinct step counts in that half.
+    """
+    half = prefix.select(prefix.steps >= cut / 2)
+    if len(np.unique(half.steps)) < 2:
+        return np.nan
+    return float(scipy.stats.theilslopes(half.returns, half.steps).slope) * SLOPE_STEPS
+
+
+def prefix_area(prefix: Curve) -> float:
+    """Trapezoidal area under the prefix over its span (its time-averaged return)."""
+    if len(prefix.steps) == 0:
+        return np.nan
+    span = prefix.steps[-1] - prefix.steps[0]
+    if span == 0:
+        return float(prefix.returns.mean())
+    return float(scipy.integrate.trapezoid(prefix.returns, prefix.steps) / span)
+
+
+def saturating(tau: ArrayLike, a: float, b: float, c: float) -> Any:
+    """The saturating curve ``a − b·exp(−c·τ)``."""
+    return a - b * np.exp(-c * np.asarray(tau, dtype=float))
+
+
+def _saturating_jacobian(tau: ArrayLike, a: float, b: float, c: float) -> Any:
+    e = np.exp(-c * np.asarray(tau, dtype=float))
+    return np.column_stack([np.ones_like(e), -e, b * np.asarray(tau) * e])
+
+
+def _grid_fit(tau: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Least-squares ``(a, b, c)`` with ``c`` on a log grid over :data:`RATE_BOUNDS`.
+
+    For a fixed ``c`` the curve is linear in ``a`` and ``b``, so every grid point is a
+    two-column least-squares problem; the best one starts :func:`curve_fit`, which
+    then cannot wander off into a poor local minimum.
+    """
+    rates = np.geomspace(*RATE_BOUNDS, 64)
+    best: tuple[float, NDArray[np.float64]] = (np.inf, np.array([y.mean(), 0.0, 1.0]))
+    for c in rates:
+        design = np.column_stack([np.ones_like(tau), -np.exp(-c * tau)])
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        sse = float(np.sum((design @ coef - y) ** 2))
+        if sse < best[0]:
+            best = (sse, np.array([coef[0], coef[1], c]))
+    return best[1]
+
+
+def saturating_extrapolation(prefix: Curve, budget: float, fallback: float) -> float:
+    """Fit :func:`saturating` to the prefix and evaluate it at the full budget.
+
+    The fit starts from :func:`_grid_fit` and refines with
+    :func:`scipy.optimize.curve_fit` under a soft-L1 loss whose scale is the grid fit's
+    robust residual spread; if the refinement fails the grid fit is used.
+
+    Args:
+        prefix: Informative prefix of one robot's curve.
+        budget: The robot's env-step budget (``τ = env_steps / budget``).
+        fallback: Returned when there are fewer than four points.
+
+    Returns:
+        The extrapolated mean return at ``τ = 1``.
+    """
+    tau, y = prefix.steps / budget, prefix.returns
+    if len(tau) < 4 or np.ptp(tau) == 0:
+        return fallback
+    params = _grid_fit(tau, y)
+    spread = 1.4826 * np.median(np.abs(saturating(tau, *params) - y))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", scipy.optimize.OptimizeWarning)
+            params, _ = scipy.optimize.curve_fit(
+                saturating, tau, y, p0=params, jac=_saturating_jacobian,
+                bounds=([-np.inf, -np.inf, RATE_BOUNDS[0]], [np.inf, np.inf, RATE_BOUNDS[1]]),
+                loss="soft_l1", f_scale=max(float(spread), 1e-9), max_nfev=200,
+            )
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        pass
+    value = float(saturating(1.0, *params))
+    return value if np.isfinite(value) else fallback
+
+
+
+
+# ---------------------------------------------------------------- the rule
+
+PREDICTORS = ("value", "area", "curve")
+"""Predictors on the return scale, which a rule can compare with a fitness."""
+
+
+@dataclass(frozen=True, slots=True)
+class EarlyRejection:
+    """``ga.early_rejection``: when to stop training an offspring early.
+
+    Attributes:
+        enabled: Whether offspring may be stopped early (off in every paper config).
+        checkpoints: Fractions of the offspring's budget at which the rule looks.
+        predictor: How the final fitness is predicted from the curve so far: ``value``,
+            ``area`` or ``curve`` (see the module docstring).
+        margin: Fitness units: stop when ``prediction + margin`` is below the population
+            minimum the offspring has to beat (larger: fewer wrong rejections).
+        last: Informative batches the ``value`` predictor averages.
+    """
+
+    enabled: bool = False
+    checkpoints: tuple[float, ...] = (0.2, 0.35, 0.5)
+    predictor: str = "value"
+    margin: float = 0.1
+    last: int = 3
+
+    def __post_init__(self) -> None:
+        if not self.checkpoints or not all(0 < c < 1 for c in self.checkpoints):
+            raise ValueError(f"checkpoints must be fractions of the budget in (0, 1), got "
+                             f"{list(self.checkpoints)}")
+        if list(self.checkpoints) != sorted(set(self.checkpoints)):
+            raise ValueError(f"checkpoints must rise, got {list(self.checkpoints)}")
+        if self.predictor not in PREDICTORS:
+            raise ValueError(f"predictor must be one of {', '.join(PREDICTORS)}, got "
+                             f"{self.predictor!r}")
+        if self.margin < 0 or self.last < 1:
+            raise ValueError(f"need margin >= 0 and last >= 1, got {self.margin}, {self.last}")
+
+
+def predict(curve: Curve, budget: float, fraction: float, predictor: str,
+            last: int = 3) -> float:
+    """The predicted final fitness of a curve cut at ``fraction`` of ``budget``.
+
+    Returns:
+        The prediction; NaN when no episode ended before the cut.
+    """
+    cut = fraction * budget
+    prefix = curve.prefix(cut)
+    value = value_at_cut(prefix, last)
+    if predictor == "value":
+        return value
+    if predictor == "area":
+        return prefix_area(prefix)
+    if predictor == "curve":
+        return saturating_extrapolation(prefix, budget, fallback=value) if np.isfinite(
+            value) else value
+    raise ValueError(f"unknown predictor {predictor!r}; expected one of {PREDICTORS}")
+
+
+@dataclass
+class Verdict:
+    """What the rule decided at a checkpoint."""
+
+    fraction: float
+    predicted: float
+    threshold: float
+    stop: bool
+
+
+class StoppingRule:
+    """The rule for one offspring: call it with every learning-curve row; it returns
+    True when training should stop.
+
+    Args:
+        config: The rule's settings.
+        budget: The offspring's budget, env steps.
+        threshold: The population minimum when it was bred, or a function giving the
+            current one (an executor that shares the run directory can see the
+            population improve while the offspring trains); NaN means nothing to beat.
+    """
+
+    def __init__(self, config: EarlyRejection, budget: int,
+                 threshold: float | Callable[[], float]) -> None:
+        self.config, self.budget = config, budget
+        self.threshold = threshold if callable(threshold) else (lambda: threshold)
+        self.rows: list[Mapping[str, float]] = []
+        self.pending = list(config.checkpoints)
+        self.verdicts: list[Verdict] = []
+
+    def __call__(self, row: Mapping[str, float]) -> bool:
+        self.rows.append(row)
+        stop = False
+        while self.pending and row["env_steps"] >= self.pending[0] * self.budget:
+            fraction = self.pending.pop(0)
+            threshold = float(self.threshold())
+            curve = Curve.from_rows(pd.DataFrame(self.rows))
+            predicted = predict(curve, self.budget, fraction, self.config.predictor,
+                                self.config.last)
+            stop = bool(np.isfinite(threshold) and np.isfinite(predicted)
+                        and predicted + self.config.margin < threshold)
+            self.verdicts.append(Verdict(fraction, predicted, threshold, stop))
+            if stop:
+                break
+        return stop
+
+    @property
+    def predicted(self) -> float:
+        """The latest prediction (NaN before the first checkpoint)."""
+        return self.verdicts[-1].predicted if self.verdicts else math.nan
+
+
+def replay_rule(config: EarlyRejection, curve: Curve, budget: float,
+                threshold: float) -> Verdict | None:
+    """The checkpoint at which the rule would have stopped a fully trained curve, or
+    None (for calibrating the rule offline on recorded runs)."""
+    for fraction in config.checkpoints:
+        predicted = predict(curve, budget, fraction, config.predictor, config.last)
+        if np.isfinite(threshold) and np.isfinite(predicted) and (
+                predicted + config.margin < threshold):
+            return Verdict(fraction, predicted, threshold, True)
+    return None

@@ -1,0 +1,260 @@
+"""Early rejection: the stopping rule on planted curves, inside a real evaluation, in the
+evolution (a stopped offspring never enters the population and is recorded with its
+steps), across a kill and resume, and off by default."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_evolution import (
+    TINY,
+    comparable,
+    fake_evaluate,
+    killed,
+    main_cmd,
+    make_evolution,
+    read_history,
+    run,
+)
+
+import evo.evolution as evolution_module
+from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
+from evo.envs.task import EnvConfig, TaskParams
+from evo.evaluation import Job, Outcome, Task, evaluate
+from evo.learners.common import LearnerConfig
+from evo.robot import load_robot
+from evo.robot.builder import PhysicsParams
+
+RULE = EarlyRejection(enabled=True, checkpoints=(0.2, 0.35, 0.5), margin=0.1)
+
+
+def rows(returns: list[float], budget: int = 10_000, episodes: int = 4) -> list[dict[str, float]]:
+    """A learning curve of len(returns) batches spread evenly over ``budget``."""
+    steps = np.linspace(budget / len(returns), budget, len(returns))
+    return [dict(env_steps=float(s), episodes=float(episodes), mean_return=r)
+            for s, r in zip(steps, returns, strict=True)]
+
+
+# ---------------------------------------------------------------- the rule
+
+
+def test_a_curve_that_plainly_cannot_beat_the_minimum_stops_at_the_first_checkpoint() -> None:
+    rule = StoppingRule(RULE, 10_000, threshold=0.5)
+    stopped_at = next(i for i, row in enumerate(rows([-1.0] * 20)) if rule(row))
+    assert rows([-1.0] * 20)[stopped_at]["env_steps"] == 2_000, "the first batch past 20 %"
+    (verdict,) = rule.verdicts
+    assert verdict.fraction == 0.2 and verdict.stop and verdict.predicted == pytest.approx(-1.0)
+
+
+def test_a_curve_that_beats_the_minimum_is_never_stopped() -> None:
+    rising = list(np.linspace(-0.5, 1.0, 20))
+    rule = StoppingRule(RULE, 10_000, threshold=-0.6)
+    assert not any(rule(row) for row in rows(rising))
+    assert [v.fraction for v in rule.verdicts] == [0.2, 0.35, 0.5] and not any(
+        v.stop for v in rule.verdicts)
+    nothing_to_beat = StoppingRule(RULE, 10_000, threshold=math.nan)
+    assert not any(nothing_to_beat(row) for row in rows([-1.0] * 20))
+
+
+def test_the_margin_spares_a_curve_just_below_the_minimum() -> None:
+    flat = rows([-0.55] * 20)
+    assert any(StoppingRule(dataclasses.replace(RULE, margin=0.0), 10_000, -0.5)(r)
+               for r in flat)
+    assert not any(StoppingRule(RULE, 10_000, -0.5)(r) for r in flat)
+
+
+def test_the_rule_follows_an_updated_minimum() -> None:
+    minimum = [-2.0]
+    rule = StoppingRule(RULE, 10_000, threshold=lambda: minimum[0])
+    curve = rows([-1.0] * 20)
+    assert not any(rule(row) for row in curve[:5])  # 20 %: -1.0 beats -2.0
+    minimum[0] = 0.0  # the population improved meanwhile
+    assert any(rule(row) for row in curve[5:])
+    assert rule.verdicts[-1].fraction == 0.35
+
+
+def test_the_offline_replay_agrees_with_the_online_rule() -> None:
+    curve = rows(list(np.linspace(-1.0, -0.2, 20)))
+    online = StoppingRule(RULE, 10_000, threshold=-0.3)
+    stop = next((row["env_steps"] for row in curve if online(row)), None)
+    offline = replay_rule(RULE, Curve.from_rows(pd.DataFrame(curve)), 10_000, -0.3)
+    assert offline is not None and stop is not None
+    assert offline.fraction == online.verdicts[-1].fraction
+    assert offline.predicted == pytest.approx(online.predicted)
+
+
+@pytest.mark.parametrize("predictor", ["value", "area", "curve"])
+def test_every_predictor_predicts_on_the_return_scale(predictor: str) -> None:
+    curve = Curve.from_rows(pd.DataFrame(rows([-1.0] * 20)))
+    assert predict(curve, 10_000, 0.5, predictor) == pytest.approx(-1.0, abs=1e-6)
+    assert math.isnan(predict(curve, 10_000, 0.01, predictor)), "no episode before the cut"
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (dict(checkpoints=(0.5, 1.5)), "checkpoints must be fractions"),
+    (dict(checkpoints=(0.5, 0.2)), "checkpoints must rise"),
+    (dict(predictor="slope"), "predictor must be one of value, area, curve"),
+    (dict(margin=-0.1), "margin >= 0"),
+])
+def test_bad_settings_are_named(change: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        EarlyRejection(**change)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------- a real evaluation
+
+NEAR = EnvConfig(task=TaskParams(t_max=40))
+TINY_LEARNER = LearnerConfig(num_envs=4, rollout_steps=64, epochs=1, minibatch_size=128,
+                             hidden=(32, 32))
+
+
+def real_task(threshold: float) -> Task:
+    robot = load_robot("robots/four_wheeler.json")
+    return Task(5, robot.name, robot.canonical_json(), 2560, 11, ("a", "b"), "crossover",
+                threshold)
+
+
+@pytest.mark.parametrize(("threshold", "stops"), [(5.0, True), (-10.0, False)])
+def test_a_real_training_stops_only_when_it_cannot_win(
+    tmp_path: Path, threshold: float, stops: bool
+) -> None:
+    job = Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path), early=RULE)
+    outcome = evaluate(real_task(threshold), job)
+    assert outcome.error is None, outcome.error
+    assert outcome.stopped_early is stops
+    if stops:  # the first batch at or past 20 % of 2,560 steps: the 2nd of 256 steps
+        assert outcome.env_steps == 512 and math.isfinite(outcome.predicted)
+        curve = pd.read_csv(tmp_path / "evals" / f"{real_task(threshold).name}.csv")
+        assert curve["env_steps"].max() == 512
+    else:
+        assert outcome.env_steps >= 2560
+
+
+# ---------------------------------------------------------------- in the evolution
+
+
+def test_a_stopped_offspring_never_enters_the_population(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def stops_every_third(task: Task, job: Job) -> Outcome:
+        outcome = fake_evaluate(task, job)
+        if task.parents and task.birth % 3 == 0:
+            assert math.isfinite(task.threshold), "an offspring knows what it must beat"
+            return dataclasses.replace(outcome, fitness=9.0, env_steps=task.budget // 5,
+                                       stopped_early=True, predicted=8.5)
+        return outcome
+
+    monkeypatch.setattr(evolution_module, "evaluate", stops_every_third)
+    evolution = make_evolution(tmp_path)
+    evolution.job = dataclasses.replace(evolution.job, early=RULE)
+    summary = evolution.run()
+    history = read_history(tmp_path)
+    stopped = history[history["status"] == "stopped-early"]
+    assert len(stopped) >= 3
+    assert not stopped["accepted"].any() and (stopped["replaced"] == "").all()
+    assert (stopped["env_steps"] == stopped["budget"] // 5).all(), "recorded with its steps"
+    assert (pd.to_numeric(stopped["predicted"]) == 8.5).all()
+    population = {m["name"] for m in json.loads((tmp_path / "population.json").read_text())[
+        "population"]}
+    assert not population & set(stopped["name"])
+    assert summary["best_fitness"] < 9.0, "a stopped robot is never named best"
+    assert summary["stopped_early"] == len(stopped)
+    assert summary["env_steps_saved"] == int((stopped["budget"] - stopped["env_steps"]).sum())
+
+
+EARLY = [*TINY, "ga.robot_budget=8", "ga.schedule.initial=1024", "ga.schedule.first=2048",
+         "ga.schedule.last=2048", "ga.early_rejection.enabled=true",
+         "ga.early_rejection.margin=0", "ga.early_rejection.checkpoints=[0.3]",
+         "executor=serial"]
+"""A tiny serial run in which the early-rejection rule stops several offspring."""
+
+
+@pytest.fixture(scope="module")
+def early_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    run_dir = tmp_path_factory.mktemp("early") / "run"
+    done = run(main_cmd(*EARLY, f"hydra.run.dir={run_dir}"), run_dir.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = read_history(run_dir)
+    assert (history["status"] == "stopped-early").sum() >= 2, "the rule stops offspring"
+    return run_dir
+
+
+@pytest.mark.slow
+def test_resume_after_a_kill_during_an_early_stopped_evaluation(
+    early_reference: Path, tmp_path: Path
+) -> None:
+    history = read_history(early_reference)
+    first_stopped = int(history.loc[history["status"] == "stopped-early", "birth"].min())
+    run_dir = tmp_path / "run"
+    # The checkpoint is saved after training stopped: killed there, the stopped robot is
+    # still in flight, and is evaluated (and stopped) again on resume.
+    killed("evaluating", first_stopped + 1, *EARLY, f"hydra.run.dir={run_dir}", cwd=tmp_path)
+    (in_flight,) = json.loads((run_dir / "state.json").read_text())["pending"]
+    assert in_flight["birth"] == first_stopped
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    pd.testing.assert_frame_equal(comparable(read_history(run_dir)), comparable(history))
+
+
+# ---------------------------------------------------------------- off by default
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "data" / "golden"))
+import make_golden  # noqa: E402
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(make_golden.RUNS))
+def test_off_by_default_every_paper_config_gives_the_history_of_before(
+    tmp_path: Path, name: str
+) -> None:
+    """Early rejection is off in every paper config, and off it changes nothing: a tiny
+    serial run of each gives the history recorded before the feature existed
+    (``tests/data/golden/``)."""
+    golden = pd.read_csv(make_golden.HERE / f"{name}.csv", dtype=str, keep_default_na=False)
+    pd.testing.assert_frame_equal(make_golden.history(name, tmp_path), golden)
+    config = (tmp_path / name / "config.yaml").read_text()
+    assert "early_rejection:\n    enabled: false" in config
+
+
+# ---------------------------------------------------------------- analysis and calibration
+
+
+@pytest.mark.slow
+def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_so(
+    early_reference: Path,
+) -> None:
+    from analysis.early_slope_report import study_robots
+    from analysis.load import load_runs
+    from analysis.report import ablation_tables
+
+    robots = load_runs([early_reference]).robots
+    stopped = robots[robots["status"] == "stopped-early"]
+    assert len(stopped) >= 2 and stopped["predicted"].notna().all()
+    tables = ablation_tables(robots, np.random.default_rng(0), n_resamples=50)
+    assert any(f"{len(stopped)} robot(s) stopped early" in note for note in tables.notes)
+    assert (tables.summary["n"] == len(robots) - len(stopped)).all(), tables.summary
+    chosen, _, note = study_robots(robots)
+    assert not set(chosen["name"]) & set(stopped["name"]) and "stopped early" in note
+
+
+@pytest.mark.slow
+def test_the_offline_replay_makes_the_decisions_the_run_made(early_reference: Path) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    from early_rejection import replay
+
+    from analysis.load import load_runs
+
+    runs = load_runs([early_reference])
+    rule = EarlyRejection(enabled=True, checkpoints=(0.3,), margin=0.0)
+    offspring = replay(runs.robots, runs.curves, runs.population_sizes, rule)
+    status = runs.robots.set_index("name")["status"]
+    assert len(offspring) >= 4
+    assert (offspring["stopped"] == (status[offspring["name"]] == "stopped-early").to_numpy()
+            ).all(), offspring
