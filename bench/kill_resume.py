@@ -43,7 +43,12 @@ RUN = [
 """A small serial evolution, recorded: 7 robots of 1-2k env steps each."""
 KINDS = ("evaluation", "state-write", "recording", "between", "time")
 
-# Runs evo/main.py in this process after arranging a SIGKILL at the k-th event of a kind.
+# Runs evo/main.py in this process after arranging a SIGKILL at the k-th event of a kind:
+# state-write (state.json half written), between (a state saved with nothing in flight),
+# evaluation (the k-th learning-curve batch), recording (an episode or a birth written,
+# not flushed), checkpoint (before the k-th policy is saved: training has ended) or
+# after-final-state (just after the state with k robots and nothing in flight is saved).
+# tests/test_evolution.py drives its SIGKILL tests with it too.
 DRIVER = r"""
 import json, os, runpy, signal, sys
 import evo.evaluation as evaluation
@@ -66,6 +71,7 @@ def die():
 
 real_write, real_open, real_birth = (evolution.write_json, evaluation.open_recorder,
                                      run_record.RunRecorder.birth)
+real_save = evaluation.save_checkpoint
 
 
 def write_json(path, data):
@@ -76,7 +82,16 @@ def write_json(path, data):
     real_write(path, data)
     if path.name == "state.json" and kind == "between" and not data["pending"] and hit():
         die()
+    if path.name == "state.json" and kind == "after-final-state":
+        if not data["pending"] and len(data["history"]) == k:
+            die()
     return path
+
+
+def save_checkpoint(*args, **kwargs):
+    if kind == "checkpoint" and hit():
+        die()
+    return real_save(*args, **kwargs)
 
 
 class Dying:
@@ -116,6 +131,7 @@ def birth(self, b):
 
 
 evolution.write_json, evaluation.open_recorder = write_json, open_recorder
+evaluation.save_checkpoint = save_checkpoint
 run_record.RunRecorder.birth = birth
 sys.argv = [main_file, *argv]
 runpy.run_path(main_file, run_name="__main__")

@@ -195,7 +195,7 @@ def test_resume_after_a_kill_during_an_early_stopped_evaluation(
     run_dir = tmp_path / "run"
     # The checkpoint is saved after training stopped: killed there, the stopped robot is
     # still in flight, and is evaluated (and stopped) again on resume.
-    killed("evaluating", first_stopped + 1, *EARLY, f"hydra.run.dir={run_dir}", cwd=tmp_path)
+    killed("checkpoint", first_stopped + 1, *EARLY, f"hydra.run.dir={run_dir}", cwd=tmp_path)
     (in_flight,) = json.loads((run_dir / "state.json").read_text())["pending"]
     assert in_flight["birth"] == first_stopped
     done = run(main_cmd(f"resume={run_dir}"), tmp_path)

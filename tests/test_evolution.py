@@ -432,51 +432,8 @@ TINY = [
 
 ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "COLUMNS": "120"}
 
-# Runs evo/main.py in this process after arranging a SIGKILL at one point of the run.
-DRIVER = r"""
-import json, os, runpy, signal, sys
-import evo.evaluation as evaluation
-import evo.evolution as evolution
-
-main_file, point, k, argv = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
-calls = 0
-
-
-def hit():
-    global calls
-    calls += 1
-    return calls == k
-
-
-def die():
-    os.kill(os.getpid(), signal.SIGKILL)
-
-
-real_write, real_save = evolution.write_json, evaluation.save_checkpoint
-
-
-def write_json(path, data):
-    if path.name == "state.json" and point == "writing-state" and hit():
-        text = json.dumps(data)
-        path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
-        die()
-    real_write(path, data)
-    if path.name == "state.json" and point == "after-final-state":
-        if not data["pending"] and len(data["history"]) == k:
-            die()
-    return path
-
-
-def save_checkpoint(*args, **kwargs):
-    if point == "evaluating" and hit():
-        die()
-    return real_save(*args, **kwargs)
-
-
-evolution.write_json, evaluation.save_checkpoint = write_json, save_checkpoint
-sys.argv = [main_file, *argv]
-runpy.run_path(main_file, run_name="__main__")
-"""
+sys.path.insert(0, str(REPO / "bench"))
+from kill_resume import DRIVER  # noqa: E402 - the fault-injection driver of the harness
 
 
 def main_cmd(*args: str) -> list[str]:
@@ -540,14 +497,6 @@ def test_smoke_experiment_end_to_end(tmp_path: Path) -> None:
     assert list(cwd.iterdir()) == [], "the run wrote outside its run directory"
 
 
-@pytest.fixture(scope="module")
-def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    run_dir = tmp_path_factory.mktemp("serial") / "run"
-    done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return run_dir
-
-
 @pytest.mark.slow
 def test_sigkilled_serial_run_resumes_to_the_uninterrupted_history(
     tmp_path: Path, serial_reference: Path
@@ -557,9 +506,9 @@ def test_sigkilled_serial_run_resumes_to_the_uninterrupted_history(
     # Killed mid-write of the state (after the first result: the 4th write, after the new
     # run's empty state, the first submission and the first result), then during the
     # training of the second robot after resuming, then just after the final state was saved.
-    killed("writing-state", 4, *start, cwd=tmp_path)
+    killed("state-write", 4, *start, cwd=tmp_path)
     assert len(read_history(run_dir)) == 1
-    killed("evaluating", 2, f"resume={run_dir}", cwd=tmp_path)
+    killed("checkpoint", 2, f"resume={run_dir}", cwd=tmp_path)
     assert len(read_history(run_dir)) == 2
     (in_flight,) = json.loads((run_dir / "state.json").read_text())["pending"]
     assert (run_dir / "evals" / f"{in_flight['name']}.csv").is_file()

@@ -26,7 +26,15 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from test_evolution import ENV, TINY, check_run_dir, comparable, main_cmd, read_history, run
+from test_evolution import (
+    ENV,
+    TINY,
+    check_run_dir,
+    comparable,
+    main_cmd,
+    read_history,
+    run,
+)
 
 from evo.rundir import RunDirectoryBusy, RunLock, is_locked
 
@@ -43,13 +51,6 @@ def tree_hash(folder: Path) -> dict[str, str]:
             for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-@pytest.fixture(scope="module")
-def finished(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A finished tiny serial run."""
-    run_dir = tmp_path_factory.mktemp("finished") / "run"
-    done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return run_dir
 
 
 def truncate_state(d: Path) -> None:
@@ -90,10 +91,10 @@ BREAKAGES: dict[str, tuple[Callable[[Path], None], str]] = {
 @pytest.mark.slow
 @pytest.mark.parametrize("breakage", sorted(BREAKAGES))
 def test_a_failing_resume_leaves_every_byte_as_it_was(
-    finished: Path, tmp_path: Path, breakage: str
+    serial_reference: Path, tmp_path: Path, breakage: str
 ) -> None:
     run_dir = tmp_path / "run"
-    shutil.copytree(finished, run_dir)
+    shutil.copytree(serial_reference, run_dir)
     damage, message = BREAKAGES[breakage]
     damage(run_dir)
     before = tree_hash(run_dir)
@@ -104,9 +105,9 @@ def test_a_failing_resume_leaves_every_byte_as_it_was(
 
 
 @pytest.mark.slow
-def test_resume_without_state_says_what_is_there(finished: Path, tmp_path: Path) -> None:
+def test_resume_without_state_says_what_is_there(serial_reference: Path, tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
-    shutil.copytree(finished, run_dir)
+    shutil.copytree(serial_reference, run_dir)
     (run_dir / "state.json").unlink()
     done = run(main_cmd(f"resume={run_dir}"), tmp_path)
     assert done.returncode == 2
@@ -180,10 +181,10 @@ time.sleep(600)
 
 @pytest.mark.slow
 def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(
-    finished: Path, tmp_path: Path
+    serial_reference: Path, tmp_path: Path
 ) -> None:
     run_dir = tmp_path / "run"
-    shutil.copytree(finished, run_dir)
+    shutil.copytree(serial_reference, run_dir)
     holder = subprocess.Popen([sys.executable, "-c", HOLD, str(run_dir)], env=ENV,
                               stdout=subprocess.PIPE, text=True)
     try:
@@ -252,7 +253,7 @@ def test_sigint_stops_the_run_with_exit_code_130(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_sigtermed_serial_run_resumes_to_the_uninterrupted_history(
-    tmp_path: Path, finished: Path
+    tmp_path: Path, serial_reference: Path
 ) -> None:
     run_dir = tmp_path / "run"
     returncode, err, _ = interrupt([*TINY, "executor=serial", f"hydra.run.dir={run_dir}"],
@@ -262,7 +263,7 @@ def test_a_sigtermed_serial_run_resumes_to_the_uninterrupted_history(
     done = run(main_cmd(f"resume={run_dir}"), tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     history = check_run_dir(run_dir, robot_budget=6)
-    pd.testing.assert_frame_equal(comparable(history), comparable(read_history(finished)))
+    pd.testing.assert_frame_equal(comparable(history), comparable(read_history(serial_reference)))
 
 
 @pytest.mark.slow

@@ -1,0 +1,18 @@
+"""Fixtures several test files share."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from test_evolution import TINY, main_cmd, run
+
+
+@pytest.fixture(scope="module")
+def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A finished tiny serial evolution (``test_evolution.TINY``): the uninterrupted run
+    that interrupted and resumed ones are compared with."""
+    run_dir = tmp_path_factory.mktemp("serial") / "run"
+    done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return run_dir
