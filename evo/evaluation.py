@@ -15,12 +15,14 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from evo.components.executors import EvalExecutor
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.task import EnvConfig, Trajectory, build_scene
+from evo.interrupt import critical
 from evo.learners.common import LearnerConfig, get_learner, save_checkpoint
 from evo.learners.rollouts import play
 from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
@@ -173,7 +175,10 @@ def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outco
     rule = (StoppingRule(job.early, task.budget, _population_minimum(Path(job.run_dir),
                                                                      task.threshold))
             if job.early.enabled and math.isfinite(task.threshold) else None)
-    with open_recorder(job.record, evals, task.name, model, metadata) as recorder:
+    with ExitStack() as stack:
+        with critical():  # a signal here waits until the recorder is on the stack
+            recorder = stack.enter_context(
+                open_recorder(job.record, evals, task.name, model, metadata))
 
         def on_curve(row: dict[str, float]) -> bool:
             recorder.curve(row)

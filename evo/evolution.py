@@ -432,12 +432,16 @@ class RunLog:
 
     def close(self, history: list[dict[str, Any]], physics: PhysicsParams, top: int = 5,
               summary: dict[str, Any] | None = None) -> None:
-        """Add the ``top`` fittest robots' geometry, then close the files."""
+        """Add the ``top`` fittest robots' geometry, then close the files (a SIGINT or
+        SIGTERM meanwhile waits until they are closed)."""
         if self.recorder is None:
             return
-        done = [r for r in history if not r["error"] and math.isfinite(r["fitness"])]
-        for row in sorted(done, key=lambda r: r["fitness"], reverse=True)[:top]:
-            robot = load_robot(self.run_dir / "robots" / f"{row['name']}.json")
-            self.recorder.robot(row["name"], build(robot, physics).compile(),
-                                fitness=float(row["fitness"]))
-        self.recorder.close(summary)
+        with critical():
+            try:
+                done = [r for r in history if not r["error"] and math.isfinite(r["fitness"])]
+                for row in sorted(done, key=lambda r: r["fitness"], reverse=True)[:top]:
+                    robot = load_robot(self.run_dir / "robots" / f"{row['name']}.json")
+                    self.recorder.robot(row["name"], build(robot, physics).compile(),
+                                        fitness=float(row["fitness"]))
+            finally:
+                self.recorder.close(summary)

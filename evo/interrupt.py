@@ -13,9 +13,10 @@ while shutting down is ignored.
 pool) end with its parent: on Linux the kernel sends it SIGTERM when the parent dies
 (``PR_SET_PDEATHSIG``), and everywhere a watchdog thread notices a new parent
 process. SIGINT is ignored there (Ctrl-C reaches the whole process group; the main
-process decides). SIGTERM inside an evaluation raises :class:`Interrupted`, so the
-evaluation's recorder closes its files, and the worker then exits
-(:func:`guarded`); SIGTERM between evaluations exits at once.
+process decides). SIGTERM inside an evaluation raises :class:`Interrupted` (held back
+in a :func:`critical` block, as in the main process), so the evaluation's recorder
+closes its files, and the worker then exits (:func:`guarded`); SIGTERM between
+evaluations exits at once.
 """
 
 from __future__ import annotations
@@ -100,6 +101,9 @@ _busy = False  # this worker is inside an evaluation
 
 
 def _worker_signal(signum: int, frame: FrameType | None) -> None:
+    if _busy and _depth:
+        _held.append(signum)
+        return
     if _busy:
         raise Interrupted(signum)
     os._exit(EXIT_CODES.get(signal.Signals(signum), 128 + signum))

@@ -48,7 +48,7 @@ from evo.edge import (
 )
 from evo.evaluation import Job
 from evo.evolution import Evolution, GAConfig, RunLog, SavedState, load_state
-from evo.interrupt import Interrupted, handle_signals
+from evo.interrupt import Interrupted, critical, handle_signals
 from evo.robot import (
     InvalidRobotError,
     Robot,
@@ -236,36 +236,44 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
               "starting it from the beginning", file=sys.stderr)
     if resuming:
         lock.claim()
-    log = RunLog(out, parts.job.record, {"config": parts.job.config_yaml, "seed": int(cfg.seed),
-                                         "method": parts.job.method, "name": out.name})
     budgets = [parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
                for b in range(parts.ga.robot_budget)]
-    with evolution_progress(budgets, parts.job.method) as show:
+    log: RunLog | None = None
+    evolution: Evolution | None = None
+    try:
+        with critical():  # opened whole, so the finally below can close it
+            log = RunLog(out, parts.job.record, {
+                "config": parts.job.config_yaml, "seed": int(cfg.seed),
+                "method": parts.job.method, "name": out.name})
+        with evolution_progress(budgets, parts.job.method) as show:
 
-        def on_result(row: dict[str, Any]) -> None:
-            show(row)
-            log(row)
-
-        evolution = Evolution(
-            out,
-            ga=parts.ga,
-            strategy=parts.strategy,
-            replacement=parts.replacement,
-            schedule=parts.schedule,
-            job=parts.job,
-            executor=parts.executor,
-            seed=int(cfg.seed),
-            on_result=on_result,
-        )
-        if saved is not None:
-            evolution.resume(saved)
-            show.resumed(evolution.history)
-            for row in evolution.history:
+            def on_result(row: dict[str, Any]) -> None:
+                show(row)
+                assert log is not None
                 log(row)
-        try:
+
+            evolution = Evolution(
+                out,
+                ga=parts.ga,
+                strategy=parts.strategy,
+                replacement=parts.replacement,
+                schedule=parts.schedule,
+                job=parts.job,
+                executor=parts.executor,
+                seed=int(cfg.seed),
+                on_result=on_result,
+            )
+            if saved is not None:
+                evolution.resume(saved)
+                show.resumed(evolution.history)
+                for row in evolution.history:
+                    log(row)
             summary = evolution.run()
-        finally:
-            log.close(evolution.history, parts.job.physics, summary=evolution.summary())
+    finally:
+        if log is not None:
+            history = evolution.history if evolution is not None else []
+            log.close(history, parts.job.physics,
+                      summary=evolution.summary() if evolution is not None else None)
     print_summary(summary, out)
 
 

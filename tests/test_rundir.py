@@ -36,6 +36,7 @@ from test_evolution import (
     run,
 )
 
+from evo.record import mcap_file, rrd
 from evo.rundir import RunDirectoryBusy, RunLock, is_locked
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -126,6 +127,44 @@ def test_the_lock_refuses_a_second_holder_and_is_freed_when_released(tmp_path: P
     assert not is_locked(tmp_path)
     with RunLock(tmp_path):
         assert is_locked(tmp_path)
+
+
+SIGNAL_AT = {
+    "opening the MCAP file": (mcap_file, "scene_geometry"),
+    "opening the rerun file": (rrd, "scene_geometry"),
+    "closing the MCAP file": (mcap_file.McapFile, "close"),
+}
+
+
+@pytest.mark.parametrize("moment", list(SIGNAL_AT))
+def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, moment: str
+) -> None:
+    """A real SIGINT, sent by the process to itself at ``moment``, is held back until
+    the files are safe: the evaluation then stops and every recording reads back."""
+    from test_early_rejection import NEAR, TINY_LEARNER, real_task
+
+    from evo.evaluation import Job, evaluate
+    from evo.interrupt import Interrupted, handle_signals
+    from evo.record import read_metadata
+    from evo.robot.builder import PhysicsParams
+
+    owner, name = SIGNAL_AT[moment]
+    original = getattr(owner, name)
+
+    def signalled(*args: object, **kwargs: object) -> object:
+        os.kill(os.getpid(), signal.SIGINT)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(owner, name, signalled)
+    task = real_task(float("-inf"))
+    with handle_signals(), pytest.raises(Interrupted):
+        evaluate(task, Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
+    files = sorted(p.name for p in (tmp_path / "evals").iterdir())
+    assert f"{task.name}.mcap" in files and f"{task.name}.rrd" in files, files
+    assert unreadable_files(tmp_path) == []
+    status = read_metadata(tmp_path / "evals" / f"{task.name}.mcap").get("status")
+    assert status == ("complete" if moment.startswith("closing") else "failed")
 
 
 def children_of(pid: int) -> list[int]:

@@ -6,6 +6,8 @@ One recorder belongs to one evaluation (one robot's training run). The learner c
 ``should_record``; the evaluation ends with ``close(summary)`` (fitness and the like).
 Every recorder is a context manager: leaving the ``with`` block through an exception
 closes it with ``{"status": "failed", "error": ...}``, so the files stay readable.
+Closing is a critical section (``evo.interrupt.critical``): a SIGINT or SIGTERM that
+arrives while the files are being finished waits until they are.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from typing import Any, Protocol, Self, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
+
+from evo.interrupt import critical
 
 F64 = npt.NDArray[np.float64]
 
@@ -224,10 +228,11 @@ class RecorderBase:
 
     def close(self, summary: Mapping[str, Any]) -> None:
         """Finish the files with ``summary``; later calls do nothing."""
-        if self.closed:
-            return
-        self.closed = True
-        self._close(summary)
+        with critical():
+            if self.closed:
+                return
+            self.closed = True
+            self._close(summary)
 
     def _close(self, summary: Mapping[str, Any]) -> None:
         raise NotImplementedError
