@@ -253,7 +253,7 @@ def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd
         "budget": steps.where(steps > 0, scheduled).fillna(0).astype(int),
         "fitness": number("fitness").astype(float),
         "accepted": text("accepted").str.lower().eq("true"),
-        "parents": text("parents").str.replace(";", ",", regex=False),
+        "parents": text("parents"),
         "scheduled_budget": scheduled.fillna(0).astype(int),
         "operator": text("operator"),
         "replaced": text("replaced"),

@@ -62,7 +62,7 @@ def _run_table(rng: np.random.Generator, method: str, seed: int, fitness: ArrayL
     names = [f"robot-{int(v):08x}" for v in rng.integers(0, 16**8, size=len(fitness))]
     accepted, populations = steady_state(fitness, population_size)
     parents = [
-        ",".join(names[p] for p in rng.choice(pop, size=2, replace=False))
+        ";".join(names[p] for p in rng.choice(pop, size=2, replace=False))
         if pop and is_evolved(method) else ""
         for pop in populations
     ]

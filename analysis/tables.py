@@ -18,7 +18,8 @@ column        dtype    meaning
 ``fitness``   float    mean return of every episode completed in that training
                        (paper Eq. 8)
 ``accepted``  bool     whether the robot entered the population
-``parents``   str      comma-separated parent names; empty for random structures
+``parents``   str      parent names joined by ``;`` as in history.csv; empty for
+                       random structures
 ============  =======  ==============================================================
 
 **Curves table**: one row per collector batch of one robot's training.

@@ -40,7 +40,8 @@ from evo.envs.gym_env import arena_params
 from evo.envs.reach import make_env
 from evo.envs.task import EnvConfig
 from evo.learners.common import LearnerConfig
-from evo.learners.ppo import evaluate, train
+from evo.learners.ppo import train
+from evo.learners.rollouts import evaluate_policy
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
 
@@ -90,9 +91,9 @@ def main() -> None:
             row += [f"{v / wall:.0%}" for v in split.values()]
             row += [f"{raw:,.0f}", f"{result.steps_per_second / raw:.2f}", f"{result.fitness:+.3f}"]
             if args.quality:
-                ev = evaluate(robot, result.policy, physics=physics, env=env, episodes=20,
-                              seed=args.seed + 1)
-                row.append(f"{ev['success_rate']:.0%}")
+                ev = evaluate_policy(robot, result.policy, physics=physics, env=env,
+                                     episodes=20, seed=args.seed + 1)
+                row.append(f"{ev.success_rate:.0%}")
             table.add_row(*row)
             if args.curves is not None:
                 args.curves.mkdir(parents=True, exist_ok=True)

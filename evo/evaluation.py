@@ -23,7 +23,8 @@ from evo.components.executors import EvalExecutor
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.task import EnvConfig, Trajectory, build_scene
 from evo.interrupt import critical
-from evo.learners.common import LearnerConfig, get_learner, save_checkpoint
+from evo.learners import get_learner
+from evo.learners.common import LearnerConfig, save_checkpoint
 from evo.learners.rollouts import play
 from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
 from evo.robot.builder import PhysicsParams

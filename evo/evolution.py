@@ -42,6 +42,7 @@ from evo.components.ga import (
     StructureStrategy,
 )
 from evo.evaluation import Job, Outcome, Task, evaluate, outcome_of
+from evo.history import HISTORY_COLUMNS, HistoryRow
 from evo.interrupt import critical
 from evo.record import RecordConfig
 from evo.record.run import Birth, RunRecorder
@@ -52,30 +53,6 @@ from evo.robot.validate import InvalidRobotError
 from evo.rundir import write_csv, write_json
 
 STATE_VERSION = 1
-HISTORY_COLUMNS = (
-    "birth",
-    "name",
-    "method",
-    "parents",
-    "operator",
-    "budget",
-    "seed",
-    "fitness",
-    "accepted",
-    "replaced",
-    "env_steps",
-    "episodes",
-    "wall_seconds",
-    "error",
-    "population_best",
-    "population_mean",
-    "status",
-    "predicted",
-)
-"""The columns of history.csv, in order (one row per evaluated robot). ``status`` is
-``trained`` (its whole budget), ``stopped-early`` (early rejection stopped it: it never
-enters the population; ``fitness`` is Eq. 8 over the episodes it completed and
-``predicted`` the rule's prediction) or ``failed``."""
 RANDOM_FALLBACK = "random-fallback"
 """History ``operator`` of a random robot made because breeding found no valid child."""
 
@@ -112,7 +89,11 @@ def evaluation_seed(seed: int, birth: int) -> int:
 
 
 class Evolution:
-    """One GA run in ``run_dir``; see the module docstring."""
+    """One GA run in ``run_dir``; see the module docstring.
+
+    ``evaluate`` trains one robot (``evo.evaluation.evaluate``; tests pass a cheaper
+    one), ``on_result`` sees every history row as it is recorded.
+    """
 
     def __init__(
         self,
@@ -125,14 +106,16 @@ class Evolution:
         job: Job,
         executor: EvalExecutor,
         seed: int,
-        on_result: Callable[[dict[str, Any]], None] | None = None,
+        on_result: Callable[[HistoryRow], None] | None = None,
+        evaluate: Callable[[Task, Job], Outcome] = evaluate,
     ) -> None:
         self.run_dir, self.ga, self.strategy = run_dir, ga, strategy
         self.replacement, self.schedule, self.job = replacement, schedule, job
         self.executor, self.seed, self.on_result = executor, seed, on_result
+        self.evaluate = evaluate  # a module-level function: executors pickle it
         self.rng = np.random.default_rng(seed)
         self.population: list[Member] = []
-        self.history: list[dict[str, Any]] = []
+        self.history: list[HistoryRow] = []
         self.pending: list[Task] = []  # submitted, not yet recorded
         self.next_birth = 0
         self.wall_before = 0.0
@@ -152,14 +135,14 @@ class Evolution:
         running: dict[Future[Outcome], Task] = {}
         try:
             for task in self.pending:  # in flight when a previous session stopped
-                running[self.executor.submit(evaluate, task, self.job)] = task
+                running[self.executor.submit(self.evaluate, task, self.job)] = task
             while True:
                 while len(running) < self.executor.workers and self._can_submit(running):
                     with critical():
                         task = self._next_task(running)
                         self.pending.append(task)
                         self._save()
-                    running[self.executor.submit(evaluate, task, self.job)] = task
+                    running[self.executor.submit(self.evaluate, task, self.job)] = task
                 if not running:
                     break
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
@@ -195,7 +178,7 @@ class Evolution:
                 # robot keeps the run going, marked in the history's operator column.
                 fresh = self.strategy.initial(self.rng)
                 offspring = Offspring(fresh.robot, (), RANDOM_FALLBACK)
-        taken = {row["name"] for row in self.history} | {t.name for t in self.pending}
+        taken = {row.name for row in self.history} | {t.name for t in self.pending}
         name = (
             offspring.robot.name
             if offspring.robot.name not in taken
@@ -230,27 +213,27 @@ class Evolution:
                 gone = self.replacement.apply(self.population, member)
                 accepted, replaced = gone is not None, gone.name if gone else ""
         fitness = [m.fitness for m in self.population]
-        row = {
-            "birth": task.birth,
-            "name": task.name,
-            "method": self.job.method,
-            "parents": ";".join(task.parents),
-            "operator": task.operator,
-            "budget": task.budget,
-            "seed": task.seed,
-            "fitness": outcome.fitness,
-            "accepted": accepted,
-            "replaced": replaced,
-            "env_steps": outcome.env_steps,
-            "episodes": outcome.episodes,
-            "wall_seconds": outcome.wall_seconds,
-            "error": outcome.error or "",
-            "population_best": max(fitness) if fitness else math.nan,
-            "population_mean": float(np.mean(fitness)) if fitness else math.nan,
-            "status": ("failed" if outcome.error is not None
-                       else "stopped-early" if outcome.stopped_early else "trained"),
-            "predicted": outcome.predicted,
-        }
+        row = HistoryRow(
+            birth=task.birth,
+            name=task.name,
+            method=self.job.method,
+            parents=task.parents,
+            operator=task.operator,
+            budget=task.budget,
+            seed=task.seed,
+            fitness=outcome.fitness,
+            accepted=accepted,
+            replaced=replaced,
+            env_steps=outcome.env_steps,
+            episodes=outcome.episodes,
+            wall_seconds=outcome.wall_seconds,
+            error=outcome.error or "",
+            population_best=max(fitness) if fitness else math.nan,
+            population_mean=float(np.mean(fitness)) if fitness else math.nan,
+            status=("failed" if outcome.error is not None
+                    else "stopped-early" if outcome.stopped_early else "trained"),
+            predicted=outcome.predicted,
+        )
         self.history.append(row)
         self.pending = [t for t in self.pending if t.birth != task.birth]
         self._save()
@@ -269,14 +252,15 @@ class Evolution:
             "next_birth": self.next_birth,
             "rng": self.rng.bit_generator.state,
             "population": [{"name": m.name, "fitness": m.fitness} for m in self.population],
-            "history": self.history,
+            "history": [row.record() for row in self.history],
             "pending": [asdict(t) for t in self.pending],
             "wall_seconds": self.wall_seconds,
         }
         write_json(self.run_dir / "state.json", state)
         if self.history:
             write_csv(self.run_dir / "history.csv",
-                      pd.DataFrame(self.history, columns=list(HISTORY_COLUMNS)))
+                      pd.DataFrame([row.record() for row in self.history],
+                                   columns=list(HISTORY_COLUMNS)))
         write_json(self.run_dir / "population.json", {"population": state["population"]})
         write_json(self.run_dir / "summary.json", self.summary())
 
@@ -301,33 +285,32 @@ class Evolution:
 
     def summary(self) -> dict[str, Any]:
         """Robots evaluated, the best robot, env steps and speed so far."""
-        done = [r for r in self.history if not r["error"]]
-        trained = [r for r in done if r.get("status") != "stopped-early"]
+        done = [r for r in self.history if not r.failed]
+        trained = [r for r in done if not r.stopped_early]
         # A robot none of whose episodes ended has only a provisional fitness (the mean
         # return of its unfinished episodes): it is named best only if no robot is better
         # placed, and then with a note. A robot stopped early is never named best.
-        finished = [r for r in trained if r["episodes"] > 0]
-        best = max(finished or trained, key=lambda r: r["fitness"], default=None)
-        initial = [r["fitness"] for r in done if not r["parents"]]
-        steps = int(sum(r["env_steps"] for r in self.history))
-        stopped = [r for r in self.history if r.get("status") == "stopped-early"]
+        finished = [r for r in trained if r.episodes > 0]
+        best = max(finished or trained, key=lambda r: r.fitness, default=None)
+        initial = [r.fitness for r in done if not r.parents]
+        steps = int(sum(r.env_steps for r in self.history))
+        stopped = [r for r in self.history if r.stopped_early]
+        offspring = [r for r in self.history if r.parents]
         return {
             "method": self.job.method,
             "robots_evaluated": len(self.history),
             "robot_budget": self.ga.robot_budget,
             "failed": len(self.history) - len(done),
-            "best_robot": best["name"] if best else None,
-            "best_fitness": best["fitness"] if best else None,
+            "best_robot": best.name if best else None,
+            "best_fitness": best.fitness if best else None,
             "best_initial_fitness": max(initial) if initial else None,
-            "accept_rate": float(np.mean([r["accepted"] for r in self.history if r["parents"]]))
-            if any(r["parents"] for r in self.history)
-            else None,
+            "accept_rate": float(np.mean([r.accepted for r in offspring])) if offspring else None,
             "env_steps": steps,
             "wall_seconds": self.wall_seconds,
             "steps_per_second": steps / max(self.wall_seconds, 1e-9),
             "complete": len(self.history) >= self.ga.robot_budget,
             "stopped_early": len(stopped),
-            "env_steps_saved": int(sum(max(0, r["budget"] - r["env_steps"]) for r in stopped)),
+            "env_steps_saved": int(sum(max(0, r.budget - r.env_steps) for r in stopped)),
             "best_note": (
                 "no robot finished an episode within its budget: the best fitness is the "
                 "mean return of unfinished episodes" if best and not finished else ""),
@@ -342,7 +325,7 @@ class SavedState:
     next_birth: int
     rng: dict[str, Any]
     population: list[Member]
-    history: list[dict[str, Any]]
+    history: list[HistoryRow]
     pending: list[Task]
     wall_seconds: float
 
@@ -371,12 +354,12 @@ def load_state(run_dir: Path) -> SavedState:
             version = state.get("version") if isinstance(state, dict) else None
             raise ValueError(f"state version {version!r}, expected {STATE_VERSION}")
         np.random.default_rng().bit_generator.state = state["rng"]
-        history = [dict(row) for row in state["history"]]
+        history = [HistoryRow.from_record(row) for row in state["history"]]
         pending = [Task(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
         fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
         saved = (int(state["seed"]), int(state["next_birth"]), float(state["wall_seconds"]))
-        births = sorted([int(r["birth"]) for r in history] + [t.birth for t in pending])
-        names = [str(r["name"]) for r in history] + [t.name for t in pending]
+        births = sorted([r.birth for r in history] + [t.birth for t in pending])
+        names = [r.name for r in history] + [t.name for t in pending]
     except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise ValueError(f"{path}: unreadable run state ({err})") from None
     if births != list(range(saved[1])):
@@ -391,7 +374,7 @@ def load_state(run_dir: Path) -> SavedState:
             robots[name] = load_robot(run_dir / "robots" / f"{name}.json")
         except (RobotFileError, InvalidRobotError) as err:
             raise ValueError(f"{path} needs robot {name}: {err}") from None
-    _check_history_csv(run_dir / "history.csv", [str(r["name"]) for r in history])
+    _check_history_csv(run_dir / "history.csv", [r.name for r in history])
     population = [Member(name, robots[name], f) for name, f in fitness.items()]
     return SavedState(saved[0], saved[1], state["rng"], population, history, pending, saved[2])
 
@@ -416,21 +399,22 @@ class RunLog:
 
     EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error",
              "status")
+    """The history columns a birth carries beside its fitness and population figures."""
 
     def __init__(self, run_dir: Path, record: RecordConfig, metadata: dict[str, Any]) -> None:
         self.run_dir = run_dir
         self.recorder = (RunRecorder(run_dir, metadata, mcap=record.mcap, rerun=record.rerun)
                          if record.enabled else None)
 
-    def __call__(self, row: dict[str, Any]) -> None:
+    def __call__(self, row: HistoryRow) -> None:
         if self.recorder is not None:
+            record = row.record()
             self.recorder.birth(Birth(
-                int(row["birth"]), str(row["name"]), float(row["fitness"]), bool(row["accepted"]),
-                float(row["population_best"]), float(row["population_mean"]),
-                extra={k: row.get(k, "") for k in self.EXTRA},
+                row.birth, row.name, row.fitness, row.accepted, row.population_best,
+                row.population_mean, extra={k: record[k] for k in self.EXTRA},
             ))
 
-    def close(self, history: list[dict[str, Any]], physics: PhysicsParams, top: int = 5,
+    def close(self, history: list[HistoryRow], physics: PhysicsParams, top: int = 5,
               summary: dict[str, Any] | None = None) -> None:
         """Add the ``top`` fittest robots' geometry, then close the files (a SIGINT or
         SIGTERM meanwhile waits until they are closed)."""
@@ -438,10 +422,10 @@ class RunLog:
             return
         with critical():
             try:
-                done = [r for r in history if not r["error"] and math.isfinite(r["fitness"])]
-                for row in sorted(done, key=lambda r: r["fitness"], reverse=True)[:top]:
-                    robot = load_robot(self.run_dir / "robots" / f"{row['name']}.json")
-                    self.recorder.robot(row["name"], build(robot, physics).compile(),
-                                        fitness=float(row["fitness"]))
+                done = [r for r in history if not r.failed and math.isfinite(r.fitness)]
+                for row in sorted(done, key=lambda r: r.fitness, reverse=True)[:top]:
+                    robot = load_robot(self.run_dir / "robots" / f"{row.name}.json")
+                    self.recorder.robot(row.name, build(robot, physics).compile(),
+                                        fitness=row.fitness)
             finally:
                 self.recorder.close(summary)

@@ -20,7 +20,6 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import hydra
 import numpy as np
@@ -48,6 +47,7 @@ from evo.edge import (
 )
 from evo.evaluation import Job
 from evo.evolution import Evolution, GAConfig, RunLog, SavedState, load_state
+from evo.history import HistoryRow
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.robot import (
     InvalidRobotError,
@@ -247,7 +247,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                 "method": parts.job.method, "name": out.name})
         with evolution_progress(budgets, parts.job.method) as show:
 
-            def on_result(row: dict[str, Any]) -> None:
+            def on_result(row: HistoryRow) -> None:
                 show(row)
                 assert log is not None
                 log(row)

@@ -21,6 +21,8 @@ from rich.progress import (
 )
 from rich.table import Table
 
+from evo.history import HistoryRow
+
 
 class EvolutionProgress:
     """Robots done / budget, best and mean fitness of the population, accept rate, ETA.
@@ -39,37 +41,36 @@ class EvolutionProgress:
         self.done: set[int] = set()
         self.started, self.steps = time.perf_counter(), 0
 
-    def __call__(self, row: dict[str, Any], *, resumed: bool = False) -> None:
-        self.done.add(int(row["birth"]))
+    def __call__(self, row: HistoryRow, *, resumed: bool = False) -> None:
+        self.done.add(row.birth)
         if not resumed:
-            self.steps += int(row["env_steps"])
-        if row["parents"]:
+            self.steps += row.env_steps
+        if row.parents:
             self.offspring += 1
-            self.accepted += int(row["accepted"])
-        best, mean = row["population_best"], row["population_mean"]
+            self.accepted += int(row.accepted)
+        best, mean = row.population_best, row.population_mean
         rate = f"{self.accepted / self.offspring:.0%}" if self.offspring else "-"
         if self.progress is not None and self.task is not None:
             status = (f"best {best:+.3f} mean {mean:+.3f} accept {rate}"
                       if math.isfinite(best) else "")
-            if row["error"]:
-                status += f" [red]{row['name']} failed[/red]"
+            if row.failed:
+                status += f" [red]{row.name} failed[/red]"
             self.progress.update(self.task, advance=1, status=status)
         elif not resumed:
             self.console.print(self.line(row), highlight=False, soft_wrap=True)
 
-    def line(self, row: dict[str, Any]) -> str:
+    def line(self, row: HistoryRow) -> str:
         """The plain progress line of one evaluated robot."""
-        if row["error"]:
-            outcome = f"failed ({str(row['error']).strip().splitlines()[-1][:80]})"
-        elif row.get("status") == "stopped-early":
-            outcome = (f"stopped early at {row['env_steps']:,} of {row['budget']:,} env steps "
-                       f"(predicted {row['predicted']:+.4f}, fitness so far {row['fitness']:+.4f})")
+        if row.failed:
+            outcome = f"failed ({row.error.strip().splitlines()[-1][:80]})"
+        elif row.stopped_early:
+            outcome = (f"stopped early at {row.env_steps:,} of {row.budget:,} env steps "
+                       f"(predicted {row.predicted:+.4f}, fitness so far {row.fitness:+.4f})")
         else:
-            outcome = (f"fitness {row['fitness']:+.4f} "
-                       f"{'accepted' if row['accepted'] else 'rejected'}")
-        best = row["population_best"]
-        return (f"{self.method} birth {row['birth']} {row['name']}: {outcome}; best "
-                f"{best:+.4f} | {len(self.done)}/{len(self.budgets)} robots | ETA {self.eta()}")
+            outcome = f"fitness {row.fitness:+.4f} {'accepted' if row.accepted else 'rejected'}"
+        return (f"{self.method} birth {row.birth} {row.name}: {outcome}; best "
+                f"{row.population_best:+.4f} | {len(self.done)}/{len(self.budgets)} robots | "
+                f"ETA {self.eta()}")
 
     def eta(self) -> str:
         """Time left: the budgets of the robots not yet evaluated at this session's speed."""
@@ -79,7 +80,7 @@ class EvolutionProgress:
         left = sum(b for i, b in enumerate(self.budgets) if i not in self.done)
         return str(datetime.timedelta(seconds=round(left / (self.steps / elapsed))))
 
-    def resumed(self, history: list[dict[str, Any]]) -> None:
+    def resumed(self, history: list[HistoryRow]) -> None:
         """Count the robots a previous session already evaluated."""
         for row in history:
             self(row, resumed=True)

@@ -24,7 +24,6 @@ from test_evolution import (
     run,
 )
 
-import evo.evolution as evolution_module
 from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
 from evo.envs.task import EnvConfig, TaskParams
 from evo.evaluation import Job, Outcome, Task, evaluate
@@ -151,8 +150,7 @@ def test_a_stopped_offspring_never_enters_the_population(
                                        stopped_early=True, predicted=8.5)
         return outcome
 
-    monkeypatch.setattr(evolution_module, "evaluate", stops_every_third)
-    evolution = make_evolution(tmp_path)
+    evolution = make_evolution(tmp_path, evaluate=stops_every_third)
     evolution.job = dataclasses.replace(evolution.job, early=RULE)
     summary = evolution.run()
     history = read_history(tmp_path)

@@ -40,8 +40,9 @@ from evo.components.ga import (
     Roulette,
 )
 from evo.envs.task import EnvConfig
-from evo.evaluation import Job, Outcome, Task
+from evo.evaluation import Job, Outcome, Task, evaluate
 from evo.evolution import Evolution, GAConfig, evaluation_seed
+from evo.history import HistoryRow
 from evo.learners.common import LearnerConfig
 from evo.robot import OperatorError, load_robot
 from evo.robot.builder import PhysicsParams
@@ -87,7 +88,8 @@ def make_evolution(
     budget: int = 14,
     seed: int = 3,
     executor: Any = None,
-    on_result: Callable[[dict[str, Any]], None] | None = None,
+    on_result: Callable[[HistoryRow], None] | None = None,
+    evaluate: Callable[[Task, Job], Outcome] = fake_evaluate,
 ) -> Evolution:
     strategy = Evolve(Roulette()) if structure == "E" else RandomStructures()
     return Evolution(
@@ -100,12 +102,8 @@ def make_evolution(
         executor=executor or SerialExecutor(),
         seed=seed,
         on_result=on_result,
+        evaluate=evaluate,
     )
-
-
-@pytest.fixture
-def fake(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
 
 
 def read_history(run_dir: Path) -> pd.DataFrame:
@@ -166,7 +164,7 @@ def check_steady_state(run_dir: Path, population_size: int, robot_budget: int, s
 # ---- the loop's rules ----------------------------------------------------------------------
 
 
-def test_evolution_follows_the_steady_state_rules(tmp_path: Path, fake: None) -> None:
+def test_evolution_follows_the_steady_state_rules(tmp_path: Path) -> None:
     summary = make_evolution(tmp_path, population=5, budget=40).run()
     check_steady_state(tmp_path, 5, 40, seed=3)
     history = read_history(tmp_path)
@@ -177,7 +175,7 @@ def test_evolution_follows_the_steady_state_rules(tmp_path: Path, fake: None) ->
     assert summary["accept_rate"] == pytest.approx(offspring["accepted"].mean())
 
 
-def test_random_structure_strategy_has_no_parents(tmp_path: Path, fake: None) -> None:
+def test_random_structure_strategy_has_no_parents(tmp_path: Path) -> None:
     make_evolution(tmp_path, structure="R", population=4, budget=20).run()
     check_steady_state(tmp_path, 4, 20, seed=3)
     history = read_history(tmp_path)
@@ -197,7 +195,7 @@ class NoCrossover:
         raise OperatorError("no crossover site")
 
 
-def test_failed_breeding_falls_back_to_a_random_robot(tmp_path: Path, fake: None) -> None:
+def test_failed_breeding_falls_back_to_a_random_robot(tmp_path: Path) -> None:
     run = make_evolution(tmp_path, population=3, budget=8)
     run.strategy = NoCrossover()
     assert run.run()["complete"]
@@ -207,7 +205,7 @@ def test_failed_breeding_falls_back_to_a_random_robot(tmp_path: Path, fake: None
     assert (history["parents"] == "").all()
 
 
-def test_the_same_seed_gives_the_same_run(tmp_path: Path, fake: None) -> None:
+def test_the_same_seed_gives_the_same_run(tmp_path: Path) -> None:
     make_evolution(tmp_path / "a", seed=8).run()
     make_evolution(tmp_path / "b", seed=8).run()
     make_evolution(tmp_path / "c", seed=9).run()
@@ -223,15 +221,13 @@ def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
         outcome = fake_evaluate(task, job)  # fitness above 0: no episode ended
         return dataclasses.replace(outcome, episodes=0 if outcome.fitness > 0 else 3)
 
-    monkeypatch.setattr(evolution_module, "evaluate", unfinished_when_fit)
-    summary = make_evolution(tmp_path / "some").run()
+    summary = make_evolution(tmp_path / "some", evaluate=unfinished_when_fit).run()
     history = read_history(tmp_path / "some")
     finished = history[history["episodes"] > 0]
     assert (history["episodes"] == 0).any() and len(finished)
     assert summary["best_fitness"] == finished["fitness"].max() and not summary["best_note"]
-    monkeypatch.setattr(evolution_module, "evaluate", lambda task, job: dataclasses.replace(
-        fake_evaluate(task, job), episodes=0))
-    summary = make_evolution(tmp_path / "none").run()
+    summary = make_evolution(tmp_path / "none", evaluate=lambda task, job: dataclasses.replace(
+        fake_evaluate(task, job), episodes=0)).run()
     assert summary["best_robot"] and "no robot finished an episode" in summary["best_note"]
 
 
@@ -243,8 +239,7 @@ def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(
             raise RuntimeError(f"simulated crash of {task.name}")
         return fake_evaluate(task, job)
 
-    monkeypatch.setattr(evolution_module, "evaluate", flaky)
-    summary = make_evolution(tmp_path, population=4, budget=12).run()
+    summary = make_evolution(tmp_path, population=4, budget=12, evaluate=flaky).run()
     history = read_history(tmp_path).set_index("birth")
     for birth in (1, 6):
         row = history.loc[birth]
@@ -265,7 +260,7 @@ def test_an_error_inside_training_is_recorded_with_its_traceback(
         raise FloatingPointError("policy diverged")
 
     monkeypatch.setattr(evaluation, "get_learner", lambda config: broken_learner)
-    summary = make_evolution(tmp_path, population=2, budget=3).run()
+    summary = make_evolution(tmp_path, population=2, budget=3, evaluate=evaluate).run()
     history = read_history(tmp_path)
     assert len(history) == 3 and history["fitness"].isna().all()
     assert history["error"].str.contains("FloatingPointError: policy diverged").all()
@@ -275,8 +270,8 @@ def test_an_error_inside_training_is_recorded_with_its_traceback(
 def test_a_dead_worker_is_recorded_and_the_run_goes_on(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(evolution_module, "evaluate", dies_on_birth_3)
-    run = make_evolution(tmp_path, population=3, budget=7, executor=LocalExecutor(workers=1))
+    run = make_evolution(tmp_path, population=3, budget=7, executor=LocalExecutor(workers=1),
+                         evaluate=dies_on_birth_3)
     summary = run.run()
     history = read_history(tmp_path)
     assert sorted(history["birth"]) == list(range(7))
@@ -334,7 +329,7 @@ BUDGET = 10
 POPULATION = 4
 # A run of BUDGET robots writes state.json once per submission and once per result.
 STATE_WRITES = 2 * BUDGET
-CRASHES: dict[str, Callable[[int], Any]] = {
+CRASHES: dict[str, Callable[[int], Any]] = {  # a faulty evaluate, or a patched global
     "during-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate)),
     "after-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate, after=True)),
     "writing-robot-file": lambda k: (
@@ -350,9 +345,7 @@ CRASHES: dict[str, Callable[[int], Any]] = {
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Path:
     run_dir = tmp_path_factory.mktemp("uninterrupted")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(evolution_module, "evaluate", fake_evaluate)
-        make_evolution(run_dir, population=POPULATION, budget=BUDGET).run()
+    make_evolution(run_dir, population=POPULATION, budget=BUDGET).run()
     return run_dir
 
 
@@ -375,12 +368,14 @@ def test_resume_after_a_crash_gives_the_uninterrupted_run(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path, where: str, k: int
 ) -> None:
     name, patched = CRASHES[where](k)
-    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
-    monkeypatch.setattr(evolution_module, name, patched)
+    if name == "evaluate":
+        crashing = make_evolution(tmp_path, population=POPULATION, budget=BUDGET, evaluate=patched)
+    else:
+        monkeypatch.setattr(evolution_module, name, patched)
+        crashing = make_evolution(tmp_path, population=POPULATION, budget=BUDGET)
     with pytest.raises(Crash):
-        make_evolution(tmp_path, population=POPULATION, budget=BUDGET).run()
+        crashing.run()
     monkeypatch.undo()
-    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
     # As evo/main.py does: resume when a state was saved, else start again.
     if (tmp_path / "state.json").exists():
         resumed = make_evolution(tmp_path, population=POPULATION, budget=BUDGET, seed=99)
@@ -395,10 +390,9 @@ def test_resume_after_a_crash_gives_the_uninterrupted_run(
 def test_resume_of_a_finished_run_evaluates_nothing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path
 ) -> None:
-    monkeypatch.setattr(evolution_module, "evaluate", fake_evaluate)
     make_evolution(tmp_path, population=POPULATION, budget=BUDGET).run()
-    monkeypatch.setattr(evolution_module, "evaluate", crash_on_call(1, fake_evaluate))
-    again = make_evolution(tmp_path, population=POPULATION, budget=BUDGET)
+    again = make_evolution(tmp_path, population=POPULATION, budget=BUDGET,
+                           evaluate=crash_on_call(1, fake_evaluate))
     again.resume()
     assert again.run()["complete"]
     same_run_files(uninterrupted, tmp_path)

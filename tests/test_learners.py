@@ -12,10 +12,10 @@ import pytest
 import torch
 
 from evo.envs.task import EnvConfig, TaskParams
+from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, load_checkpoint, make_policy, save_checkpoint
-from evo.learners.ppo import act_deterministic, evaluate
 from evo.learners.ppo import train as train_ppo
-from evo.learners.random import train as train_random
+from evo.learners.rollouts import evaluate_policy
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
 
@@ -48,21 +48,22 @@ def ppo_run():  # noqa: ANN201
 
 @pytest.fixture(scope="module")
 def random_run():  # noqa: ANN201
-    return train_random(
-        FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=SMALL, budget=BUDGET, seed=1
+    random = dataclasses.replace(SMALL, name="random", update=False)  # conf/learner/random
+    return get_learner(random)(
+        FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=random, budget=BUDGET, seed=1
     )
 
 
 def test_ppo_clearly_beats_the_random_learner(ppo_run, random_run) -> None:  # noqa: ANN001
     assert ppo_run.fitness > random_run.fitness + 0.3, (ppo_run.fitness, random_run.fitness)
-    ppo_eval = evaluate(
+    ppo_eval = evaluate_policy(
         FOUR_WHEELER, ppo_run.policy, physics=PHYSICS, env=NEAR, episodes=20, seed=99
     )
-    random_eval = evaluate(
+    random_eval = evaluate_policy(
         FOUR_WHEELER, random_run.policy, physics=PHYSICS, env=NEAR, episodes=20, seed=99
     )
-    assert ppo_eval["success_rate"] >= 0.6, ppo_eval
-    assert ppo_eval["success_rate"] >= random_eval["success_rate"] + 0.4, (ppo_eval, random_eval)
+    assert ppo_eval.success_rate >= 0.6, ppo_eval
+    assert ppo_eval.success_rate >= random_eval.success_rate + 0.4, (ppo_eval, random_eval)
     late = ppo_run.curve["success_rate"].iloc[-4:].mean()
     early = ppo_run.curve["success_rate"].iloc[:4].mean()
     assert late > early, f"success rate did not rise during training: {early} -> {late}"
@@ -103,7 +104,7 @@ def test_reloaded_checkpoint_acts_identically(ppo_run, tmp_path: Path) -> None: 
     loaded = load_checkpoint(path)
     obs = torch.randn(64, FOUR_WHEELER.obs_size) * 3
     torch.testing.assert_close(
-        act_deterministic(loaded, obs), act_deterministic(ppo_run.policy, obs), rtol=0, atol=0
+        loaded.mean_action(obs), ppo_run.policy.mean_action(obs), rtol=0, atol=0
     )
 
 
@@ -131,9 +132,14 @@ def test_random_learner_never_changes_its_weights(ppo_run, random_run) -> None: 
 
 
 def test_mean_action_is_the_deterministic_action(ppo_run) -> None:  # noqa: ANN001
+    """``mean_action`` is what TorchRL's actor gives in deterministic exploration mode."""
+    from tensordict import TensorDict
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
     obs = torch.randn(32, FOUR_WHEELER.obs_size) * 3
-    torch.testing.assert_close(ppo_run.policy.mean_action(obs),
-                               act_deterministic(ppo_run.policy, obs), rtol=0, atol=0)
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        actor = ppo_run.policy.actor(TensorDict({"observation": obs}, batch_size=[32]))
+    torch.testing.assert_close(ppo_run.policy.mean_action(obs), actor["action"], rtol=0, atol=0)
 
 
 def test_train_and_evaluate_from_the_command_line(tmp_path: Path) -> None:

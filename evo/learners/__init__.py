@@ -1,1 +1,63 @@
-"""Learners of the inner loop: PPO and the random policy (SPEC section 4)."""
+"""Learners of the inner loop (SPEC section 4): what a learner is, and which exist.
+
+A learner trains one robot's behaviour for a budget of env steps and returns its
+fitness, learning curve and policy (:class:`Learner`). Learners are looked up by the
+``name`` of their config (``conf/learner/<name>.yaml``) in :data:`LEARNERS`:
+
+* ``ppo``: PPO through TorchRL (:mod:`evo.learners.ppo`);
+* ``random``: the same PPO loop with ``update: false``: the network at its seeded
+  initialisation, never trained (the "R" behaviour of the paper's ablations).
+
+To add a learner, write a module with a ``train`` function of the :class:`Learner`
+signature, give it a ``conf/learner/<name>.yaml`` and an entry here.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:
+    from evo.envs.task import EnvConfig, Trajectory
+    from evo.learners.common import LearnerConfig, TrainResult
+    from evo.robot.builder import PhysicsParams
+    from evo.robot.tree import Robot
+
+CurveHook = Callable[[dict[str, float]], bool | None]
+"""Called with every learning-curve row as soon as it exists (recorders, progress, early
+rejection); returning True asks training to stop after this batch."""
+
+EpisodeHook = Callable[["Trajectory", int], None]
+"""Called with every finished episode of arena 0 and the env-step count at its end."""
+
+
+class Learner(Protocol):
+    """Trains ``robot``'s behaviour for ``budget`` env steps; randomness only from
+    ``seed``. ``on_curve`` gets every curve row, ``on_episode`` every episode of arena 0."""
+
+    def __call__(
+        self,
+        robot: Robot,
+        *,
+        physics: PhysicsParams,
+        env: EnvConfig,
+        config: LearnerConfig,
+        budget: int,
+        seed: int,
+        on_curve: CurveHook | None = None,
+        on_episode: EpisodeHook | None = None,
+    ) -> TrainResult: ...
+
+
+LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo", "random": "evo.learners.ppo"}
+"""Learner name -> the module whose ``train`` it is (imported when first asked for)."""
+
+
+def get_learner(config: LearnerConfig) -> Learner:
+    """The ``train`` function of the learner ``config.name``."""
+    if config.name not in LEARNERS:
+        raise ValueError(f"learner.name: unknown learner {config.name!r}; expected one of "
+                         f"{', '.join(sorted(LEARNERS))}")
+    train: Learner = importlib.import_module(LEARNERS[config.name]).train
+    return train

@@ -10,10 +10,9 @@ reproduces the policy (no environment transform to restore).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import pandas as pd
 import torch
@@ -22,8 +21,6 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
-from evo.envs.task import EnvConfig, Trajectory
-from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
 
@@ -355,28 +352,3 @@ def load_checkpoint(path: Path, *, robot: Robot | None = None,
                          f"{obs_size}; run it with the env settings it was trained with "
                          "(env.task.observe_up adds 3)")
     return policy
-
-
-class Learner(Protocol):
-    """A learner: trains one robot's behaviour for ``budget`` env steps."""
-
-    def __call__(
-        self,
-        robot: Robot,
-        *,
-        physics: PhysicsParams,
-        env: EnvConfig,
-        config: LearnerConfig,
-        budget: int,
-        seed: int,
-        on_curve: Callable[[dict[str, float]], bool | None] | None = None,
-        on_episode: Callable[[Trajectory, int], None] | None = None,
-    ) -> TrainResult: ...
-
-
-def get_learner(config: LearnerConfig) -> Learner:
-    """The training function for ``config`` (PPO, or the random learner when
-    ``update`` is false)."""
-    from evo.learners import ppo, random
-
-    return ppo.train if config.update else random.train

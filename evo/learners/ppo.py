@@ -23,30 +23,23 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
 
 import numpy as np
 import pandas as pd
 import torch
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
-from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from evo.envs.reach import make_env
-from evo.envs.task import REWARD_TERMS, EnvConfig, Trajectory
+from evo.envs.task import REWARD_TERMS, EnvConfig
+from evo.learners import CurveHook, EpisodeHook
 from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
-
-CurveHook = Callable[[dict[str, float]], bool | None]
-"""Called with every learning-curve row as soon as it exists (recorders, progress, early
-rejection); returning True asks training to stop after this batch."""
-EpisodeHook = Callable[[Trajectory, int], None]
-"""Called with every finished episode of arena 0 and the env-step count at its end."""
 
 _LOSS_KEYS = {
     "loss/objective": "loss_objective",
@@ -243,48 +236,3 @@ def _learn(
     # Statistics change only after the update, so the update's ratios start at 1.
     policy.norm.update(batch["observation"])
     return {**losses, "lr": lr}
-
-
-def act_deterministic(policy: Policy, observation: torch.Tensor) -> torch.Tensor:
-    """The policy's mean action for ``observation`` (no exploration noise)."""
-    from tensordict import TensorDict
-
-    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
-        td = TensorDict({"observation": observation}, batch_size=observation.shape[:-1])
-        action: torch.Tensor = policy.actor(td)["action"]
-    return action
-
-
-def evaluate(
-    robot: Robot,
-    policy: Policy,
-    *,
-    physics: PhysicsParams,
-    env: EnvConfig,
-    episodes: int,
-    seed: int,
-) -> dict[str, Any]:
-    """Run ``episodes`` deterministic episodes (one per arena, in parallel).
-
-    Returns:
-        ``success_rate``, ``mean_return`` and the list of ``returns``.
-    """
-    reach = make_env(robot, physics, env, episodes, seed)
-    td = reach.reset()
-    finished = torch.zeros(episodes, dtype=torch.bool)
-    returns = torch.zeros(episodes)
-    success = torch.zeros(episodes, dtype=torch.bool)
-    while not finished.all():
-        td["action"] = act_deterministic(policy, td["observation"])
-        nxt = reach.step(td)["next"]
-        done = nxt["done"].squeeze(-1) & ~finished
-        returns[done] = nxt["episode_return"].squeeze(-1)[done]
-        success[done] = nxt["success"].squeeze(-1)[done]
-        finished |= done
-        td = nxt
-    reach.close()
-    return {
-        "success_rate": float(success.float().mean()),
-        "mean_return": float(returns.mean()),
-        "returns": returns.tolist(),
-    }

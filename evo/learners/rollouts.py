@@ -1,15 +1,21 @@
-"""Deterministic episodes of a trained policy, frame by frame (for recording and replay).
+"""Deterministic episodes of a trained policy: its evaluation, and frame by frame play.
 
-``play`` runs a policy's mean action in one arena and keeps every frame of every
-episode (``evo.envs.task.Trajectory``: poses of every body, joint positions, reward
-terms, outcome). The same ``seed`` gives the same episodes, so an episode recorded after
+Both run the policy's mean action (``Policy.mean_action``, no exploration noise).
+``evaluate_policy`` runs one episode per arena in parallel and returns the success rate
+and returns (``+exp=train``'s evaluation, ``+exp=evaluate``). ``play`` runs episodes
+one after another in one arena and keeps every frame (``evo.envs.task.Trajectory``:
+poses of every body, joint positions, reward terms, outcome), for recording and
+replay. The same ``seed`` gives the same episodes, so an episode recorded after
 training can be replayed later from the checkpoint alone.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
+from evo.envs.reach import make_env
 from evo.envs.task import EnvConfig, ReachCore, Trajectory
 from evo.learners.common import Policy
 from evo.robot.builder import PhysicsParams
@@ -42,3 +48,51 @@ def play(
             done = bool(step.terminated[0] or step.truncated[0])
     core.watch(None)
     return core, played
+
+
+@dataclass(frozen=True, slots=True)
+class PolicyEvaluation:
+    """The outcome of ``evaluate_policy``.
+
+    Attributes:
+        success_rate: Share of the episodes that reached the target.
+        mean_return: Mean episode return.
+        returns: Every episode's return, arena by arena.
+    """
+
+    success_rate: float
+    mean_return: float
+    returns: tuple[float, ...]
+
+    def summary(self) -> dict[str, float | list[float]]:
+        """``success_rate``, ``mean_return`` and the list of ``returns`` (summary.json)."""
+        return {"success_rate": self.success_rate, "mean_return": self.mean_return,
+                "returns": list(self.returns)}
+
+
+def evaluate_policy(
+    robot: Robot,
+    policy: Policy,
+    *,
+    physics: PhysicsParams,
+    env: EnvConfig,
+    episodes: int,
+    seed: int,
+) -> PolicyEvaluation:
+    """Run ``episodes`` deterministic episodes, one per arena, in parallel."""
+    reach = make_env(robot, physics, env, episodes, seed)
+    td = reach.reset()
+    finished = torch.zeros(episodes, dtype=torch.bool)
+    returns = torch.zeros(episodes)
+    success = torch.zeros(episodes, dtype=torch.bool)
+    while not finished.all():
+        td["action"] = policy.mean_action(td["observation"])
+        nxt = reach.step(td)["next"]
+        done = nxt["done"].squeeze(-1) & ~finished
+        returns[done] = nxt["episode_return"].squeeze(-1)[done]
+        success[done] = nxt["success"].squeeze(-1)[done]
+        finished |= done
+        td = nxt
+    reach.close()
+    return PolicyEvaluation(float(success.float().mean()), float(returns.mean()),
+                            tuple(returns.tolist()))

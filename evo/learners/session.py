@@ -17,8 +17,9 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from evo.envs.task import EnvConfig, observation_size
-from evo.learners.common import LearnerConfig, get_learner, load_checkpoint, save_checkpoint
-from evo.learners.ppo import evaluate
+from evo.learners import get_learner
+from evo.learners.common import LearnerConfig, load_checkpoint, save_checkpoint
+from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
@@ -89,7 +90,7 @@ def train_robot(
         "timing_seconds": result.timing,
     }
     if learner.eval_episodes:
-        evaluation = evaluate(
+        evaluation = evaluate_policy(
             robot,
             result.policy,
             physics=physics,
@@ -97,8 +98,8 @@ def train_robot(
             episodes=learner.eval_episodes,
             seed=seed + 1,
         )
-        summary["success_rate"] = evaluation["success_rate"]
-        summary["eval_mean_return"] = evaluation["mean_return"]
+        summary["success_rate"] = evaluation.success_rate
+        summary["eval_mean_return"] = evaluation.mean_return
         summary["eval_episodes"] = learner.eval_episodes
     write_json(out / "summary.json", summary)
     console.print(
@@ -129,19 +130,20 @@ def evaluate_robot(
     """Run the policy in ``checkpoint`` deterministically for ``episodes`` episodes."""
     console = console or Console()
     policy = load_checkpoint(checkpoint, robot=robot, obs_size=observation_size(robot, env.task))
-    evaluation = evaluate(robot, policy, physics=physics, env=env, episodes=episodes, seed=seed)
+    evaluation = evaluate_policy(robot, policy, physics=physics, env=env, episodes=episodes,
+                                 seed=seed)
     summary = {
         "robot": robot.name,
         "checkpoint": str(checkpoint),
         "arena": env.name,
         "episodes": episodes,
         "seed": seed,
-        **evaluation,
+        **evaluation.summary(),
     }
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "summary.json", summary)
     console.print(
-        f"{robot.name}: success {evaluation['success_rate']:.0%}, mean return "
-        f"{evaluation['mean_return']:+.4f} over {episodes} deterministic episodes"
+        f"{robot.name}: success {evaluation.success_rate:.0%}, mean return "
+        f"{evaluation.mean_return:+.4f} over {episodes} deterministic episodes"
     )
     return summary
