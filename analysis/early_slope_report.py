@@ -139,13 +139,7 @@ def early_slope_study(
     if chosen.empty:
         raise ValueError(f"no robot with a fitness to study (methods {methods or 'learned'})")
     notes = [note]
-    sizes = (population_size if isinstance(population_size, Mapping)
-             else dict.fromkeys(chosen["run"].unique(), population_size))
-    table = pd.concat([
-        es.early_table(rows, curves[curves["run"].isin(rows["run"].unique())], fractions,
-                       population_size=size)
-        for size, rows in chosen.groupby(chosen["run"].map(sizes))
-    ], ignore_index=True)
+    table = _early_table(chosen, curves, fractions, population_size)
     no_curve = int(table.groupby(["run", "name"])["value"].apply(lambda v: v.isna().all()).sum())
     if no_curve:
         notes.append(f"{no_curve} robot(s) have no informative batch before any cut "
@@ -157,16 +151,26 @@ def early_slope_study(
     fitness_preds = preds[preds["target"] == "fitness"]
     rejection = es.rejection_tradeoff(fitness_preds, quantile=quantile, top_k=k)
     population = es.rejection_tradeoff(fitness_preds, threshold_column="threshold", top_k=k)
-    ceiling = None
-    if retrained is None:
-        notes.append("Noise ceiling: absent (no retrained structures given; "
-                     "--retrained DIR...).")
-    else:
-        ceiling, note = noise_ceiling_of(chosen, retrained, rng, n_resamples=n_resamples)
-        notes.append(note)
+    ceiling, note = (noise_ceiling_of(chosen, retrained, rng, n_resamples=n_resamples)
+                     if retrained is not None else
+                     (None, "Noise ceiling: absent (no retrained structures given; "
+                            "--retrained DIR...)."))
+    notes.append(note)
     return EarlySlopeStudy(methods=studied, robots=len(chosen), table=table, preds=preds,
                            metrics=metrics, rejection=rejection,
                            rejection_population=population, ceiling=ceiling, notes=notes)
+
+
+def _early_table(chosen: pd.DataFrame, curves: pd.DataFrame, fractions: Sequence[float],
+                 population_size: int | Mapping[str, int]) -> pd.DataFrame:
+    """``early_slope.early_table`` of every run, each with its own population size."""
+    sizes = (population_size if isinstance(population_size, Mapping)
+             else dict.fromkeys(chosen["run"].unique(), population_size))
+    return pd.concat([
+        es.early_table(rows, curves[curves["run"].isin(rows["run"].unique())], fractions,
+                       population_size=size)
+        for size, rows in chosen.groupby(chosen["run"].map(sizes))
+    ], ignore_index=True)
 
 
 def noise_ceiling_of(
@@ -360,7 +364,8 @@ def write_early_slope_report(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.early_slope RUN... --out DIR``; exit 0, or 2 on a bad input."""
-    cli = parser("Early-slope study (paper sections 8-9) of evo runs.")
+    cli = parser("Early-slope study (paper sections 8-9) of evo runs.",
+                 prog="python -m analysis.early_slope")
     cli.add_argument("--retrained", nargs="+", type=Path, default=None,
                      help="directories of structures trained again (noise ceiling)")
     cli.add_argument("--methods", nargs="+", default=None,

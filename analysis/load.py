@@ -420,6 +420,41 @@ def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
 # ---------------------------------------------------------------- retrained structures
 
 
+def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
+    """The :func:`load_retrained` rows of everything under ``path``, and whether it
+    holds any noise-ceiling folder, evolution run or training run."""
+    rows: list[dict[str, Any]] = []
+    tables = sorted({p for p in (path / "trainings.csv", *path.rglob("trainings.csv"))
+                     if p.is_file()})
+    found = bool(tables)
+    for table_path in tables:
+        trainings = pd.read_csv(table_path)
+        for row in trainings[trainings["role"] == "seed"].itertuples(index=False):
+            rows.append(dict(structure=str(row.structure), train_seed=row.seed,
+                             fitness=float(row.fitness), budget=row.env_steps,
+                             source=str(table_path.parent)))
+    summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
+                 if p.is_file() and p.parent.name != "evals"}
+    for summary_path in sorted(summaries):
+        run_dir = summary_path.parent
+        if (run_dir / HISTORY).is_file():
+            for row in read_history(run_dir).itertuples(index=False):
+                rows.append(dict(structure=_structure(str(row.name)),
+                                 train_seed=getattr(row, "seed", np.nan),
+                                 fitness=float(row.fitness),
+                                 budget=getattr(row, "env_steps", row.budget),
+                                 source=str(run_dir)))
+            found = True
+            continue
+        summary = _summary(run_dir)
+        if {"robot", "seed", "fitness"} <= summary.keys():
+            rows.append(dict(structure=_structure(str(summary["robot"])),
+                             train_seed=summary["seed"], fitness=float(summary["fitness"]),
+                             budget=summary.get("env_steps", np.nan), source=str(run_dir)))
+            found = True
+    return rows, found
+
+
 def load_retrained(paths: PathsLike) -> pd.DataFrame:
     """Fitness of structures trained again, for :func:`analysis.noise_ceiling.noise_ceiling`.
 
@@ -445,42 +480,13 @@ def load_retrained(paths: PathsLike) -> pd.DataFrame:
     for path in _as_paths(paths):
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such directory of retrained robots")
-        found = False
-        for table_path in sorted({p for p in (path / "trainings.csv",
-                                              *path.rglob("trainings.csv")) if p.is_file()}):
-            trainings = pd.read_csv(table_path)
-            for row in trainings[trainings["role"] == "seed"].itertuples(index=False):
-                rows.append(dict(structure=str(row.structure), train_seed=row.seed,
-                                 fitness=float(row.fitness), budget=row.env_steps,
-                                 source=str(table_path.parent)))
-            found = True
-        summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
-                     if p.is_file() and p.parent.name != "evals"}
-        for summary_path in sorted(summaries):
-            run_dir = summary_path.parent
-            if (run_dir / HISTORY).is_file():
-                history = read_history(run_dir)
-                for row in history.itertuples(index=False):
-                    rows.append(dict(structure=_structure(str(row.name)),
-                                     train_seed=getattr(row, "seed", np.nan),
-                                     fitness=float(row.fitness),
-                                     budget=getattr(row, "env_steps", row.budget),
-                                     source=str(run_dir)))
-                found = True
-            else:
-                summary = _summary(run_dir)
-                if {"robot", "seed", "fitness"} <= summary.keys():
-                    rows.append(dict(structure=_structure(str(summary["robot"])),
-                                     train_seed=summary["seed"],
-                                     fitness=float(summary["fitness"]),
-                                     budget=summary.get("env_steps", np.nan),
-                                     source=str(run_dir)))
-                    found = True
+        retrained, found = _retrained_in(path)
         if not found:
             raise RunDirectoryError(
                 f"{path}: holds no training run (summary.json with robot, seed, fitness), "
                 f"no evolution run ({HISTORY}) and no noise ceiling (trainings.csv)"
             )
+        rows += retrained
     table = pd.DataFrame(rows).drop_duplicates()
     return table.reset_index(drop=True)
 

@@ -377,10 +377,28 @@ def read_trainings(out: Path) -> pd.DataFrame:
     return pd.read_csv(path)
 
 
-def _write_csv(table: pd.DataFrame, path: Path) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    table.to_csv(tmp, index=False)
-    tmp.replace(path)
+def _jobs(out: Path, parts: Any, settings: Settings) -> dict[str, Any]:
+    """The evaluation job of each role: ``seed`` (the learner) and ``baseline`` (the
+    random learner: the same network, never updated)."""
+    from evo.evaluation import Job
+
+    learner = parts.learner
+    random_learner = dataclasses.replace(learner, update=False, name="random")
+    return {role: Job(parts.physics, parts.env, config, str(out), config.name,
+                      record=parts.record, config_yaml=settings.config)
+            for role, config in (("seed", learner), ("baseline", random_learner))}
+
+
+def _training_row(out: Path, training: Training, learner: str, settings: Settings,
+                  outcome: Any) -> dict[str, Any]:
+    """The ``trainings.csv`` row of one finished training."""
+    curve = pd.read_csv(out / "evals" / f"{training.name}.csv")
+    return dict(
+        name=training.name, structure=training.structure, role=training.role, learner=learner,
+        replicate=training.replicate, seed=training.seed, budget=settings.budget,
+        fitness=outcome.fitness, fitness_late=late_fitness(curve, settings.budget),
+        episodes=outcome.episodes, env_steps=outcome.env_steps,
+        wall_seconds=outcome.wall_seconds)
 
 
 def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequence[Any],
@@ -394,30 +412,26 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
         left out, so the next call tries them again.
     """
     from evo.edge import executor_of, training_parts, warn_if_failures_cannot_end
-    from evo.evaluation import Job, Task, evaluate, outcome_of
+    from evo.evaluation import Task, evaluate, outcome_of
     from evo.robot.io import save_robot
+    from evo.rundir import write_csv
 
     parts = training_parts(cfg)
-    learner = parts.learner
-    warn_if_failures_cannot_end(settings.budget, "--budget", learner, parts.env)
-    random_learner = dataclasses.replace(learner, update=False, name="random")
-    jobs = {role: Job(parts.physics, parts.env, config, str(out), config.name,
-                      record=parts.record, config_yaml=settings.config)
-            for role, config in (("seed", learner), ("baseline", random_learner))}
+    warn_if_failures_cannot_end(settings.budget, "--budget", parts.learner, parts.env)
+    jobs = _jobs(out, parts, settings)
     by_name = {r.name: r for r in robots}
     (out / "robots").mkdir(parents=True, exist_ok=True)
     for robot in robots:
         save_robot(robot, out / "robots" / f"{robot.name}.json")
-    table = read_trainings(out)
-    done = set(table["name"])
+    rows = read_trainings(out).to_dict("records")
+    done = {row["name"] for row in rows}
     plan = plan_trainings(settings.structures, seeds=settings.seeds, root=settings.root_seed,
-                          baseline=settings.baseline and learner.update)
+                          baseline=settings.baseline and parts.learner.update)
     todo = [t for t in plan if t.name not in done]
     log(f"{len(plan) - len(todo)} of {len(plan)} trainings already done; {len(todo)} to run")
     wall_before, start = wall_seconds(out), time.perf_counter()
     executor = executor_of(cfg)
     running: dict[Future[Any], tuple[Training, Task]] = {}
-    rows = table.to_dict("records")
     try:
         while todo or running:
             while todo and len(running) < executor.workers:
@@ -425,8 +439,7 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
                 task = Task(len(rows) + len(running), training.name,
                             by_name[training.structure].canonical_json(), settings.budget,
                             training.seed, (), "noise-ceiling")
-                job = jobs[training.role]
-                running[executor.submit(evaluate, task, job)] = (training, task)
+                running[executor.submit(evaluate, task, jobs[training.role])] = (training, task)
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
                 training, task = running.pop(future)
@@ -434,15 +447,9 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
                 if outcome.error is not None:
                     log(f"{training.name}: failed ({outcome.error.strip().splitlines()[-1]})")
                     continue
-                curve = pd.read_csv(out / "evals" / f"{training.name}.csv")
-                rows.append(dict(
-                    name=training.name, structure=training.structure, role=training.role,
-                    learner=job.learner.name,
-                    replicate=training.replicate, seed=training.seed, budget=settings.budget,
-                    fitness=outcome.fitness, fitness_late=late_fitness(curve, settings.budget),
-                    episodes=outcome.episodes, env_steps=outcome.env_steps,
-                    wall_seconds=outcome.wall_seconds))
-                _write_csv(pd.DataFrame(rows, columns=list(TRAINING_COLUMNS)), out / TRAININGS)
+                rows.append(_training_row(out, training, jobs[training.role].learner.name,
+                                          settings, outcome))
+                write_csv(out / TRAININGS, pd.DataFrame(rows, columns=list(TRAINING_COLUMNS)))
                 _write_progress(out, wall_before + time.perf_counter() - start)
                 log(f"{len(rows)}/{len(plan)} {training.name}: fitness {outcome.fitness:+.3f} "
                     f"({outcome.env_steps:,} env steps, {outcome.wall_seconds:.0f} s)")
@@ -459,9 +466,9 @@ def wall_seconds(out: Path) -> float:
 
 
 def _write_progress(out: Path, seconds: float) -> None:
-    tmp = out / (PROGRESS + ".tmp")
-    tmp.write_text(json.dumps({"wall_seconds": seconds}) + "\n")
-    tmp.replace(out / PROGRESS)
+    from evo.rundir import write_json
+
+    write_json(out / PROGRESS, {"wall_seconds": seconds})
 
 
 # ---------------------------------------------------------------- report

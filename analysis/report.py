@@ -86,6 +86,24 @@ class AblationTables:
     notes: list[str] = field(default_factory=list)
 
 
+def _input_notes(robots: pd.DataFrame, scored: pd.DataFrame,
+                 missing: list[str]) -> tuple[list[str], int]:
+    """What the input lacks (methods, fitnesses, whole budgets), and how many robots
+    failed."""
+    notes = []
+    if missing:
+        notes.append(f"Methods missing from the input: {', '.join(missing)}; the tests "
+                     "and contrasts that need them are left out.")
+    stopped = int((robots["status"] == "stopped-early").sum()) if "status" in robots else 0
+    left_out = len(robots) - len(scored) - stopped
+    if left_out:
+        notes.append(f"{left_out} robot(s) without a fitness (failed evaluation) left out.")
+    if stopped:
+        notes.append(f"{stopped} robot(s) stopped early by early rejection left out of the "
+                     "fitness statistics: their fitness covers only part of a budget.")
+    return notes, left_out
+
+
 def ablation_tables(
     robots: pd.DataFrame,
     rng: np.random.Generator,
@@ -114,17 +132,7 @@ def ablation_tables(
         raise ValueError(f"no fully trained robot with a fitness among {len(robots)} robots")
     present = method_order(scored["method"])
     missing = [m for m in METHODS if m not in present]
-    notes = []
-    if missing:
-        notes.append(f"Methods missing from the input: {', '.join(missing)}; the tests "
-                     "and contrasts that need them are left out.")
-    stopped = int((robots["status"] == "stopped-early").sum()) if "status" in robots else 0
-    left_out = len(robots) - len(scored) - stopped
-    if left_out:
-        notes.append(f"{left_out} robot(s) without a fitness (failed evaluation) left out.")
-    if stopped:
-        notes.append(f"{stopped} robot(s) stopped early by early rejection left out of the "
-                     "fitness statistics: their fitness covers only part of a budget.")
+    notes, left_out = _input_notes(robots, scored, missing)
     summary = stats.summarize(scored, rng, k=k, confidence=confidence,
                               n_resamples=n_resamples)
     kruskal, pairwise = _tests(scored, None, notes)
@@ -410,10 +418,10 @@ def report_folder(out: str | Path) -> Path:
     return out
 
 
-def parser(description: str) -> argparse.ArgumentParser:
+def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser:
     """The arguments every report CLI takes: run directories, ``--out``, ``--seed``,
     ``--resamples``."""
-    cli = argparse.ArgumentParser(description=description)
+    cli = argparse.ArgumentParser(prog=prog, description=description)
     cli.add_argument("runs", nargs="+", type=Path,
                      help="run directories, or folders holding them (a multirun folder)")
     cli.add_argument("--out", type=Path, required=True, help="report folder (created)")

@@ -228,12 +228,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         cfg = _resumed_config(Path(str(cfg.resume)))
         check_seed(cfg)
     parts = evolve_parts(cfg, out)
-    saved = None
-    if (out / "state.json").exists() or (resuming and _evaluated_before(out)):
-        saved = _saved_state(out)
-    elif resuming:
-        print(f"{out}: no robot was evaluated before the run stopped (no state.json yet); "
-              "starting it from the beginning", file=sys.stderr)
+    saved = _state_to_continue(out, resuming)
     if resuming:
         lock.claim()
     budgets = [parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
@@ -253,16 +248,9 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                 log(row)
 
             evolution = Evolution(
-                out,
-                ga=parts.ga,
-                strategy=parts.strategy,
-                replacement=parts.replacement,
-                schedule=parts.schedule,
-                job=parts.job,
-                executor=parts.executor,
-                seed=int(cfg.seed),
-                on_result=on_result,
-            )
+                out, ga=parts.ga, strategy=parts.strategy, replacement=parts.replacement,
+                schedule=parts.schedule, job=parts.job, executor=parts.executor,
+                seed=int(cfg.seed), on_result=on_result)
             if saved is not None:
                 evolution.resume(saved)
                 show.resumed(evolution.history)
@@ -275,6 +263,17 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
             log.close(history, parts.job.physics,
                       summary=evolution.summary() if evolution is not None else None)
     print_summary(summary, out)
+
+
+def _state_to_continue(out: Path, resuming: bool) -> SavedState | None:
+    """The checked saved state of the run in ``out``, or None for a run that starts
+    (a resume that stopped before its first result starts from the beginning)."""
+    if (out / "state.json").exists() or (resuming and _evaluated_before(out)):
+        return _saved_state(out)
+    if resuming:
+        print(f"{out}: no robot was evaluated before the run stopped (no state.json yet); "
+              "starting it from the beginning", file=sys.stderr)
+    return None
 
 
 def _evaluated_before(run_dir: Path) -> bool:

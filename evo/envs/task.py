@@ -364,23 +364,7 @@ class ReachCore:
             raise ValueError(f"action: expected {self.num_envs} x {self.action_size} values "
                              f"(arenas x actuators), got shape {act.shape}")
         act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
-        self.ctrl[:] = act * self.ctrl_scale
-        self._warmstart[:] = 0.0  # a cold solver start, as from a saved state
-        before = self.time.copy()
-        failed = np.zeros(self.num_envs, dtype=bool)
-        tick = time.perf_counter()
-        try:
-            self.batch.step(nstep=self.task.frame_skip)
-        except mujoco.batch.SimulationError as err:  # MuJoCo gave up on those arenas
-            failed[np.asarray(err.ids, dtype=np.intp)] = True
-        self.physics_seconds += time.perf_counter() - tick
-        self._count_warnings()
-        dt = self.model.opt.timestep * self.task.frame_skip
-        self.sensordata[:] = self._sensor_out
-        unstable = failed | ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(self.qvel).all(
-            axis=1) | ~np.isfinite(self.sensordata).all(axis=1)
-        unstable |= np.abs(self.time - before - dt) > 0.5 * self.model.opt.timestep
-        unstable |= self._diverged()
+        unstable = self._simulate(act)
         self.action[:] = act
         observation, distance = self._observe()
         stable = ~unstable
@@ -417,6 +401,29 @@ class ReachCore:
         )
 
     # ---- internals -----------------------------------------------------------------------
+    def _simulate(self, act: npt.NDArray[np.float64]) -> Bools:
+        """Apply ``act`` and run ``frame_skip`` physics steps in every arena; returns
+        which arenas went unstable (MuJoCo gave up, non-finite state, a lost step or a
+        divergence warning)."""
+        self.ctrl[:] = act * self.ctrl_scale
+        self._warmstart[:] = 0.0  # a cold solver start, as from a saved state
+        before = self.time.copy()
+        failed = np.zeros(self.num_envs, dtype=bool)
+        tick = time.perf_counter()
+        try:
+            self.batch.step(nstep=self.task.frame_skip)
+        except mujoco.batch.SimulationError as err:  # MuJoCo gave up on those arenas
+            failed[np.asarray(err.ids, dtype=np.intp)] = True
+        self.physics_seconds += time.perf_counter() - tick
+        self._count_warnings()
+        dt = self.model.opt.timestep * self.task.frame_skip
+        self.sensordata[:] = self._sensor_out
+        unstable: Bools = failed | ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(
+            self.qvel).all(axis=1) | ~np.isfinite(self.sensordata).all(axis=1)
+        unstable |= np.abs(self.time - before - dt) > 0.5 * self.model.opt.timestep
+        unstable |= self._diverged()
+        return unstable
+
     def _diverged(self) -> Bools:
         """Arenas whose state MuJoCo found bad (NaN, Inf or huge qpos, qvel or qacc) and
         reset during the last step: it carries on from the reset state, which only its

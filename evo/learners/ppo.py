@@ -124,6 +124,34 @@ def train(
         return _train(robot, physics, env, config, budget, seed, on_curve, on_episode)
 
 
+def _objective(
+    policy: Policy, config: LearnerConfig
+) -> tuple[ClipPPOLoss, GAE, torch.optim.Optimizer]:
+    """The clipped PPO loss (paper Eqs. 6-7), its advantage estimator and optimiser."""
+    loss = ClipPPOLoss(
+        policy.actor,
+        policy.critic,
+        clip_epsilon=config.clip_epsilon,
+        entropy_coeff=config.entropy_coeff,
+        critic_coeff=config.critic_coeff,
+        loss_critic_type="l2",
+        normalize_advantage=True,
+    )
+    gae = GAE(
+        gamma=config.gamma, lmbda=config.lmbda, value_network=policy.critic, deactivate_vmap=True
+    )
+    return loss, gae, torch.optim.Adam(loss.parameters(), lr=config.lr)
+
+
+def _batch_row(batch: TensorDictBase, steps: int,
+               episodes: dict[str, torch.Tensor]) -> dict[str, float]:
+    """The curve row's env-step count, episode statistics and reward terms of a batch."""
+    row = {"env_steps": float(steps), **_episode_stats(episodes)}
+    for term in REWARD_TERMS:
+        row[f"reward/{term}"] = float(batch["next", "reward_terms", term].mean())
+    return row
+
+
 def _train(
     robot: Robot,
     physics: PhysicsParams,
@@ -140,19 +168,7 @@ def _train(
         core = env.core
         core.watch(lambda episode: on_episode(episode, int(core.steps_taken)))
     policy = make_policy(env.core.obs_size, env.core.action_size, config)
-    loss = ClipPPOLoss(
-        policy.actor,
-        policy.critic,
-        clip_epsilon=config.clip_epsilon,
-        entropy_coeff=config.entropy_coeff,
-        critic_coeff=config.critic_coeff,
-        loss_critic_type="l2",
-        normalize_advantage=True,
-    )
-    gae = GAE(
-        gamma=config.gamma, lmbda=config.lmbda, value_network=policy.critic, deactivate_vmap=True
-    )
-    optimizer = torch.optim.Adam(loss.parameters(), lr=config.lr)
+    loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     collector = Collector(
         env, policy.sampler(), frames_per_batch=config.frames_per_batch, total_frames=frames,
@@ -171,9 +187,7 @@ def _train(
             episodes = _completed(batch)
             returns_sum += float(episodes["return"].sum())
             returns_count += int(episodes["return"].numel())
-            row = {"env_steps": float(steps), **_episode_stats(episodes)}
-            for term in REWARD_TERMS:
-                row[f"reward/{term}"] = float(batch["next", "reward_terms", term].mean())
+            row = _batch_row(batch, steps, episodes)
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
             row["wall_seconds"] = time.perf_counter() - start
@@ -189,17 +203,10 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
-    return TrainResult(
-        fitness=fitness,
-        curve=pd.DataFrame(rows),
-        policy=policy,
-        env_steps=steps,
-        episodes=returns_count,
-        wall_seconds=time.perf_counter() - start,
-        unstable=env.core.unstable_count,
-        timing=timing,
-        stopped_early=stopped,
-    )
+    return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
+                       env_steps=steps, episodes=returns_count,
+                       wall_seconds=time.perf_counter() - start,
+                       unstable=env.core.unstable_count, timing=timing, stopped_early=stopped)
 
 
 @contextmanager

@@ -18,7 +18,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from evo.envs.task import EnvConfig, observation_size
 from evo.learners import get_learner
-from evo.learners.common import LearnerConfig, load_checkpoint, save_checkpoint
+from evo.learners.common import LearnerConfig, TrainResult, load_checkpoint, save_checkpoint
 from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
@@ -76,6 +76,27 @@ def train_robot(
         )
     result.curve.to_csv(out / "curve.csv", index=False)
     save_checkpoint(result.policy, out / "policy.pt", learner, robot=robot.hash)
+    summary = _train_summary(robot, result, physics=physics, env=env, learner=learner,
+                             seed=seed)
+    write_json(out / "summary.json", summary)
+    console.print(
+        f"{robot.name}: fitness {result.fitness:+.4f} over {result.episodes} episodes, "
+        f"{result.env_steps:,} env steps in {result.wall_seconds:.1f} s "
+        f"({result.steps_per_second:,.0f} steps/s)"
+    )
+    if "success_rate" in summary:
+        console.print(
+            f"deterministic evaluation: success {summary['success_rate']:.0%}, mean return "
+            f"{summary['eval_mean_return']:+.4f} over {learner.eval_episodes} episodes"
+        )
+    console.print(f"files: {out}")
+    return summary
+
+
+def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
+                   env: EnvConfig, learner: LearnerConfig, seed: int) -> dict[str, Any]:
+    """``summary.json`` of one training, with the deterministic evaluation (seed + 1)
+    when ``learner.eval_episodes`` asks for one."""
     summary: dict[str, Any] = {
         "robot": robot.name,
         "learner": learner.name,
@@ -101,18 +122,6 @@ def train_robot(
         summary["success_rate"] = evaluation.success_rate
         summary["eval_mean_return"] = evaluation.mean_return
         summary["eval_episodes"] = learner.eval_episodes
-    write_json(out / "summary.json", summary)
-    console.print(
-        f"{robot.name}: fitness {result.fitness:+.4f} over {result.episodes} episodes, "
-        f"{result.env_steps:,} env steps in {result.wall_seconds:.1f} s "
-        f"({result.steps_per_second:,.0f} steps/s)"
-    )
-    if "success_rate" in summary:
-        console.print(
-            f"deterministic evaluation: success {summary['success_rate']:.0%}, mean return "
-            f"{summary['eval_mean_return']:+.4f} over {learner.eval_episodes} episodes"
-        )
-    console.print(f"files: {out}")
     return summary
 
 

@@ -263,60 +263,56 @@ class _Builder:
     def module_geoms(self, body: ET.Element, m: Placed, name: str) -> ET.Element:
         """Geoms and joints of one module; returns the body its children attach to."""
         p, kind = self.p, m.node.type
-        half = p.module_size / 2 - p.module_gap / 2
         self.bodies_of[m.path] = [name]
         if kind is ModuleType.WHEEL:
-            assert m.parent is not None
-            sign = 1 if m.path[-1] % 2 == 0 else -1
-            driven = m.parent.node.type is ModuleType.MOTOR
-            ET.SubElement(
-                body,
-                "joint",
-                name=name,
-                type="hinge",
-                axis=f"{sign} 0 0",
-                armature=f"{p.motor_armature if driven else p.passive_wheel_armature:.6g}",
-                damping="0" if driven else f"{p.passive_wheel_damping:.6g}",
-            )
-            ET.SubElement(
-                body,
-                "geom",
-                name=name,
-                type="cylinder",
-                zaxis=f"1 {WHEEL_AXIS_SKEW:.6g} 0",
-                size=f"{p.wheel_radius:.6g} {p.wheel_width / 2:.6g}",
-                mass=f"{p.wheel_mass:.6g}",
-                material="wheel",
-            )
-            self.wheel_joints.setdefault(m.parent.path, []).append(name)
-            return body
+            return self.wheel(body, m, name)
+        if kind is ModuleType.PIVOT:
+            return self.pivot(body, m, name)
         mass = p.brain_mass if kind is ModuleType.BRAIN else p.module_mass
-        if kind is not ModuleType.PIVOT:
-            ET.SubElement(
-                body,
-                "geom",
-                name=name,
-                type="box",
-                size=_fmt([half] * 3),
-                mass=f"{mass:.6g}",
-                material=kind.value,
-            )
-            if kind is ModuleType.MOTOR:
-                self.motors.append(name)
-            return body
-        # A pivot: the proximal half is this body, the distal half a child body on the hinge.
-        quarter = p.module_size / 4
-        box = _fmt([quarter - p.module_gap / 4, half, half])
+        half = p.module_size / 2 - p.module_gap / 2
+        ET.SubElement(body, "geom", name=name, type="box", size=_fmt([half] * 3),
+                      mass=f"{mass:.6g}", material=kind.value)
+        if kind is ModuleType.MOTOR:
+            self.motors.append(name)
+        return body
+
+    def wheel(self, body: ET.Element, m: Placed, name: str) -> ET.Element:
+        """A wheel: a cylinder on a hinge, driven by its parent motor or passive."""
+        p = self.p
+        assert m.parent is not None
+        sign = 1 if m.path[-1] % 2 == 0 else -1
+        driven = m.parent.node.type is ModuleType.MOTOR
+        ET.SubElement(
+            body,
+            "joint",
+            name=name,
+            type="hinge",
+            axis=f"{sign} 0 0",
+            armature=f"{p.motor_armature if driven else p.passive_wheel_armature:.6g}",
+            damping="0" if driven else f"{p.passive_wheel_damping:.6g}",
+        )
         ET.SubElement(
             body,
             "geom",
             name=name,
-            type="box",
-            size=box,
-            pos=f"{-quarter:.6g} 0 0",
-            mass=f"{mass / 2:.6g}",
-            material="pivot",
+            type="cylinder",
+            zaxis=f"1 {WHEEL_AXIS_SKEW:.6g} 0",
+            size=f"{p.wheel_radius:.6g} {p.wheel_width / 2:.6g}",
+            mass=f"{p.wheel_mass:.6g}",
+            material="wheel",
         )
+        self.wheel_joints.setdefault(m.parent.path, []).append(name)
+        return body
+
+    def pivot(self, body: ET.Element, m: Placed, name: str) -> ET.Element:
+        """A pivot: the proximal half is ``body``, the distal half a child body on the
+        hinge, which its children attach to."""
+        p = self.p
+        half, quarter = p.module_size / 2 - p.module_gap / 2, p.module_size / 4
+        box = _fmt([quarter - p.module_gap / 4, half, half])
+        mass = p.module_mass
+        ET.SubElement(body, "geom", name=name, type="box", size=box, pos=f"{-quarter:.6g} 0 0",
+                      mass=f"{mass / 2:.6g}", material="pivot")
         distal = ET.SubElement(body, "body", name=f"{name}_distal")
         limit = p.pivot_range
         ET.SubElement(
@@ -328,16 +324,8 @@ class _Builder:
             range=f"{-limit:.6g} {limit:.6g}",
             armature=f"{p.pivot_armature:.6g}",
         )
-        ET.SubElement(
-            distal,
-            "geom",
-            name=f"{name}_distal",
-            type="box",
-            size=box,
-            pos=f"{quarter:.6g} 0 0",
-            mass=f"{mass / 2:.6g}",
-            material="pivot_distal",
-        )
+        ET.SubElement(distal, "geom", name=f"{name}_distal", type="box", size=box,
+                      pos=f"{quarter:.6g} 0 0", mass=f"{mass / 2:.6g}", material="pivot_distal")
         self.bodies_of[m.path].append(f"{name}_distal")
         self.pivots.append(name)
         return distal

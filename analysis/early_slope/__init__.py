@@ -348,6 +348,18 @@ def rank_metrics(
 # ---------------------------------------------------------------- early rejection
 
 
+def _thresholds(group: pd.DataFrame, prediction: NDArray[np.float64], quantile: float,
+                threshold_column: str | None) -> NDArray[np.float64]:
+    """Each robot's rejection threshold at one cut: the ``quantile`` of the finite
+    predictions, or its own ``threshold_column``. A robot is rejected when its
+    prediction is below (NaN on either side compares False: never rejected)."""
+    if threshold_column is not None:
+        return group[threshold_column].to_numpy(dtype=float)
+    finite = prediction[np.isfinite(prediction)]
+    cut_value = np.quantile(finite, quantile) if len(finite) else np.nan
+    return np.full(len(group), cut_value)
+
+
 def rejection_tradeoff(
     preds: pd.DataFrame,
     *,
@@ -383,13 +395,7 @@ def rejection_tradeoff(
     for (target, fraction, predictor), group in preds.groupby(
             ["target", "fraction", "predictor"], sort=False):
         prediction = group["prediction"].to_numpy(dtype=float)
-        if threshold_column is None:
-            finite = prediction[np.isfinite(prediction)]
-            cut_value = np.quantile(finite, quantile) if len(finite) else np.nan
-            threshold = np.full(len(group), cut_value)
-        else:
-            threshold = group[threshold_column].to_numpy(dtype=float)
-        rejected = prediction < threshold  # NaN on either side compares False
+        rejected = prediction < _thresholds(group, prediction, quantile, threshold_column)
         budget = group["budget"].to_numpy(dtype=float)
         fitness = group["fitness"].to_numpy(dtype=float)
         rank = group["fitness"].rank(ascending=False, method="first").to_numpy()
@@ -409,11 +415,3 @@ def rejection_tradeoff(
     table = pd.DataFrame(rows, columns=columns)
     table.insert(7, "saved_share", table["steps_saved"] / table["steps_total"])
     return table
-
-
-if __name__ == "__main__":  # python -m analysis.early_slope RUN... --out DIR
-    import sys
-
-    from analysis.early_slope_report import main
-
-    sys.exit(main())

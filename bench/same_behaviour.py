@@ -1,0 +1,116 @@
+"""Does a change of the code change what a run computes? Run the same small serial
+evolution with a fixed seed on an earlier commit and on the working tree, and compare
+what they computed.
+
+    python bench/same_behaviour.py --before REV [--out runs/same_behaviour] [overrides...]
+
+The earlier commit is checked out into ``OUT/tree`` (``git worktree``) and both runs use
+this virtualenv. Compared, robot by robot: the ``history.csv`` columns (every one but
+wall times), the learning curves ``evals/<robot>.csv`` (every column but wall times;
+curve keys renamed since are matched through ``evo.record.rows.CURVE_ALIASES`` when it
+exists) and the policies ``evals/<robot>.pt`` (every tensor, bit for bit). Prints one
+line per comparison and exits 0 when everything is identical.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+RUN = [
+    "+exp=smoke", "executor=serial", "ga.population_size=3", "ga.robot_budget=7",
+    "ga.schedule.initial=1024", "ga.schedule.first=1024", "ga.schedule.last=2048",
+    "learner.num_envs=4", "learner.rollout_steps=64", "learner.epochs=2",
+    "learner.minibatch_size=128", "learner.hidden=[32,32]", "env.task.t_max=40",
+    "record=off", "seed=5",
+]
+"""A small serial evolution: 7 robots of 1-2k env steps, crossover included."""
+
+
+def run(tree: Path, run_dir: Path, overrides: list[str]) -> None:
+    """``python evo/main.py`` of ``tree`` (its own ``evo`` package first on the path)."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "MUJOCO_GL": "egl"}
+    done = subprocess.run([sys.executable, str(tree / "evo" / "main.py"), *RUN, *overrides,
+                           f"hydra.run.dir={run_dir}"], cwd=tree, env=env,
+                          capture_output=True, text=True, timeout=1800)
+    if done.returncode != 0:
+        raise SystemExit(f"{tree}: the run failed\n{done.stderr[-3000:]}")
+
+
+def renamed(curve: pd.DataFrame) -> pd.DataFrame:
+    """``curve`` with old curve keys under their current names, without wall times."""
+    try:
+        from evo.record.rows import CURVE_ALIASES  # type: ignore[attr-defined]
+    except ImportError:
+        aliases: dict[str, str] = {}
+    else:
+        aliases = dict(CURVE_ALIASES)
+    curve = curve.rename(columns=aliases)
+    return curve.drop(columns=[c for c in curve if "wall_seconds" in c]).sort_index(axis=1)
+
+
+def policies_equal(a: Path, b: Path) -> bool:
+    """Whether two checkpoints hold the same tensors, bit for bit."""
+    sa, sb = (torch.load(p, weights_only=True) for p in (a, b))
+    for part in ("actor", "critic"):
+        if sa[part].keys() != sb[part].keys():
+            return False
+        if not all(torch.equal(sa[part][k], sb[part][k]) for k in sa[part]):
+            return False
+    return sa["obs_size"] == sb["obs_size"] and sa["action_size"] == sb["action_size"]
+
+
+def compare(before: Path, after: Path) -> list[str]:
+    """One line per difference between the two run directories (none: identical)."""
+    diffs = []
+    ha, hb = (pd.read_csv(d / "history.csv", keep_default_na=False).drop(
+        columns=["wall_seconds"]) for d in (before, after))
+    if not ha.equals(hb):
+        diffs.append(f"history.csv differs:\n{ha.compare(hb) if ha.shape == hb.shape else ''}")
+    print(f"history: {len(hb)} robots, fitness {'identical' if ha.equals(hb) else 'DIFFERS'}")
+    for name in hb["name"]:
+        ca, cb = (renamed(pd.read_csv(d / "evals" / f"{name}.csv")) for d in (before, after))
+        same_curve = ca.equals(cb)
+        same_policy = policies_equal(before / "evals" / f"{name}.pt",
+                                     after / "evals" / f"{name}.pt")
+        print(f"{name}: curve ({len(cb)} rows) {'identical' if same_curve else 'DIFFERS'}, "
+              f"policy {'identical' if same_policy else 'DIFFERS'}")
+        if not same_curve:
+            diffs.append(f"{name}: curve differs")
+        if not same_policy:
+            diffs.append(f"{name}: policy differs")
+    return diffs
+
+
+def main() -> int:
+    cli = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    cli.add_argument("--before", required=True, help="the earlier commit (any git revision)")
+    cli.add_argument("--out", type=Path, default=REPO / "runs" / "same_behaviour")
+    cli.add_argument("overrides", nargs="*", help="more config overrides for both runs")
+    args = cli.parse_args()
+    shutil.rmtree(args.out, ignore_errors=True)
+    args.out.mkdir(parents=True)
+    tree = args.out / "tree"
+    subprocess.run(["git", "worktree", "add", "--detach", "-f", str(tree), args.before],
+                   cwd=REPO, check=True, capture_output=True)
+    try:
+        run(tree, args.out / "before", args.overrides)
+        run(REPO, args.out / "after", args.overrides)
+        diffs = compare(args.out / "before", args.out / "after")
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO,
+                       capture_output=True)
+    print("same behaviour" if not diffs else f"{len(diffs)} difference(s)")
+    return 0 if not diffs else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
