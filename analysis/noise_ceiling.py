@@ -352,6 +352,21 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int,
     return chosen
 
 
+def _what_trains(config: str) -> tuple[Any, ...] | None:
+    """The typed groups of a resolved config that decide a training's result (physics,
+    env, learner, robot generation and limits), defaults filled in; None if it does not
+    parse. Other groups (the GA's, recording) leave the numbers as they are."""
+    from evo.edge import generator_of, limits_of, training_parts
+
+    try:
+        cfg = OmegaConf.create(config)
+        assert isinstance(cfg, DictConfig)
+        parts = training_parts(cfg)
+        return parts.physics, parts.env, parts.learner, generator_of(cfg), limits_of(cfg)
+    except Exception:  # noqa: BLE001 - any unreadable config differs from a readable one
+        return None
+
+
 def _check_settings(out: Path, settings: Settings) -> None:
     """Refuse an output folder that holds a noise ceiling of other settings."""
     path = out / SETTINGS
@@ -362,7 +377,10 @@ def _check_settings(out: Path, settings: Settings) -> None:
     except json.JSONDecodeError as err:
         raise NoiseCeilingError(f"{path}: unreadable ({err})") from None
     mine = settings.to_json()
-    differ = [k for k in Settings.COMPARED if json.dumps(stored.get(k)) != json.dumps(mine[k])]
+    differ = [k for k in Settings.COMPARED if k != "config"
+              and json.dumps(stored.get(k)) != json.dumps(mine[k])]
+    if _what_trains(str(stored.get("config"))) != _what_trains(settings.config):
+        differ.append("config")
     if differ:
         raise NoiseCeilingError(
             f"--out {out}: holds a noise ceiling with other settings ({', '.join(differ)} "
@@ -412,7 +430,7 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
         left out, so the next call tries them again.
     """
     from evo.edge import executor_of, training_parts, warn_if_failures_cannot_end
-    from evo.evaluation import Task, evaluate, outcome_of
+    from evo.evaluation import Candidate, evaluate, outcome_of
     from evo.robot.io import save_robot
     from evo.rundir import write_csv
 
@@ -431,19 +449,20 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
     log(f"{len(plan) - len(todo)} of {len(plan)} trainings already done; {len(todo)} to run")
     wall_before, start = wall_seconds(out), time.perf_counter()
     executor = executor_of(cfg)
-    running: dict[Future[Any], tuple[Training, Task]] = {}
+    running: dict[Future[Any], tuple[Training, Candidate]] = {}
     try:
         while todo or running:
             while todo and len(running) < executor.workers:
                 training = todo.pop(0)
-                task = Task(len(rows) + len(running), training.name,
+                candidate = Candidate(len(rows) + len(running), training.name,
                             by_name[training.structure].canonical_json(), settings.budget,
                             training.seed, (), "noise-ceiling")
-                running[executor.submit(evaluate, task, jobs[training.role])] = (training, task)
+                job = jobs[training.role]
+                running[executor.submit(evaluate, candidate, job)] = (training, candidate)
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
-                training, task = running.pop(future)
-                outcome = outcome_of(future, task, executor)
+                training, candidate = running.pop(future)
+                outcome = outcome_of(future, candidate, executor)
                 if outcome.error is not None:
                     log(f"{training.name}: failed ({outcome.error.strip().splitlines()[-1]})")
                     continue

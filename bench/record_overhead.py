@@ -21,7 +21,7 @@ from rich.console import Console
 from rich.table import Table
 
 from evo.envs.task import EnvConfig
-from evo.evaluation import Job, Task, evaluate
+from evo.evaluation import Candidate, Job, evaluate
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
 from evo.robot import load_robot
@@ -37,7 +37,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     robot = load_robot(args.robot)
-    task = Task(0, robot.name, robot.canonical_json(), args.steps, seed=3)
+    candidate = Candidate(0, robot.name, robot.canonical_json(), args.steps, seed=3)
     rates: dict[str, float] = {"on": 0.0, "off": 0.0}
     sizes: dict[str, int] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -46,7 +46,7 @@ def main() -> None:
                 "off": dataclasses.replace(base, record=RecordConfig(mcap=False, rerun=False))}
         for _ in range(args.repeats):
             for label, job in jobs.items():
-                outcome = evaluate(task, job)
+                outcome = evaluate(candidate, job)
                 if outcome.error:
                     raise SystemExit(outcome.error)
                 rates[label] = max(rates[label], outcome.env_steps / outcome.wall_seconds)

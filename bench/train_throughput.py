@@ -23,6 +23,7 @@ Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import glob
 from pathlib import Path
 
@@ -31,19 +32,14 @@ import numpy as np
 import pandas as pd
 import torch
 from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
-from hydra import compose, initialize_config_dir
 from rich.console import Console
 from rich.table import Table
 
-from evo.config import typed
-from evo.envs.gym_env import arena_params
+from evo.edge import TrainingParts, compose_config, training_parts
 from evo.envs.reach import make_env
-from evo.envs.task import EnvConfig
-from evo.learners.common import LearnerConfig
 from evo.learners.ppo import train
 from evo.learners.rollouts import evaluate_policy
 from evo.robot import load_robot
-from evo.robot.builder import PhysicsParams
 
 
 def main() -> None:
@@ -59,9 +55,8 @@ def main() -> None:
                         help="folder for every run's learning curve (CSV) and curves.png")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    config = train_learner(args.overrides)
+    config = trained_with(args.arenas[0], args.overrides).learner
     print(config)
-    physics = PhysicsParams()
     table = Table(title=f"PPO end to end, {args.steps:,} env steps, {config.num_envs} arenas x "
                   f"{config.rollout_steps} steps, minibatch {config.minibatch_size}, "
                   f"{args.nthread} physics threads")
@@ -74,7 +69,8 @@ def main() -> None:
     for path in args.robots:
         robot = load_robot(path)
         for arena in args.arenas:
-            env = EnvConfig(name=arena, nthread=args.nthread, arena=arena_params(arena))
+            parts = trained_with(arena, args.overrides)
+            physics, env = parts.physics, dataclasses.replace(parts.env, nthread=args.nthread)
             probe = make_env(robot, physics, env, config.num_envs, args.seed)
             probe.reset()
             raw = raw_rate(probe, 100, np.random.default_rng(0))
@@ -104,12 +100,9 @@ def main() -> None:
         print(plot_curves(args.curves))
 
 
-def train_learner(overrides: list[str]) -> LearnerConfig:
-    """The learner ``python evo/main.py +exp=train`` trains with (plus ``overrides``)."""
-    conf = Path(__file__).resolve().parents[1] / "conf"
-    with initialize_config_dir(config_dir=str(conf), version_base="1.3"):
-        cfg = compose("config", overrides=["+exp=train", *overrides])
-    return typed(LearnerConfig, cfg.learner, "learner")
+def trained_with(arena: str, overrides: list[str]) -> TrainingParts:
+    """What ``python evo/main.py +exp=train env=<arena> <overrides>`` trains with."""
+    return training_parts(compose_config(["+exp=train", f"env={arena}", *overrides]))
 
 
 def plot_curves(folder: Path) -> Path:

@@ -27,7 +27,15 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     if isinstance(value, DictConfig | ListConfig):
         value = OmegaConf.to_container(value, resolve=True)
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
-        return value if isinstance(value, hint) else typed(hint, value, key)
+        if isinstance(value, hint):
+            return value
+        if isinstance(value, Mapping) and "_target_" in value:
+            built = instantiate(value, key)
+            if not isinstance(built, hint):
+                raise ConfigError(f"{key}._target_: expected a {hint.__name__} (or a "
+                                  f"subclass), got {type(built).__name__}")
+            return built
+        return typed(hint, value, key)
     origin = typing.get_origin(hint)
     if origin is tuple:
         if not isinstance(value, list | tuple):
@@ -91,11 +99,15 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
     kwargs = {name: _coerce(v, hints[name], f"{key}.{name}") for name, v in raw.items()}
     try:
         return cls(**kwargs)
+    except ConfigError:
+        raise
     except (ValueError, TypeError) as err:
-        raise ConfigError(f"{key}: {err}") from None
+        # "field: what is wrong" from the dataclass's own checks names key.field
+        name = str(err).partition(":")[0]
+        raise ConfigError(f"{key}.{err}" if name in fields else f"{key}: {err}") from None
 
 
-def instantiate(node: DictConfig, key: str) -> Any:
+def instantiate(node: DictConfig | Mapping[str, Any], key: str) -> Any:
     """The object a config node with ``_target_`` describes, built through ``typed``.
 
     The class comes from ``_target_`` (a dataclass); the other keys are its fields, so
@@ -103,14 +115,14 @@ def instantiate(node: DictConfig, key: str) -> Any:
     """
     from hydra.utils import get_class
 
-    target = node.get("_target_") if isinstance(node, DictConfig) else None
+    target = node.get("_target_") if isinstance(node, DictConfig | Mapping) else None
     if not isinstance(target, str):
         raise ConfigError(f"{key}: expected a mapping with a _target_ class")
     try:
         cls = get_class(target)
     except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
         raise ConfigError(f"{key}._target_: no class {target!r}") from None
-    plain = OmegaConf.to_container(node, resolve=True)
-    assert isinstance(plain, dict)
+    plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
+    assert isinstance(plain, Mapping)
     fields = {str(k): v for k, v in plain.items() if k != "_target_"}
     return typed(cls, fields, key)

@@ -60,6 +60,11 @@ def physics_of(cfg: DictConfig) -> PhysicsParams:
     return typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
 
 
+def env_of(cfg: DictConfig) -> EnvConfig:
+    """``env``: the arena and the task."""
+    return typed(EnvConfig, cfg.env, "env")
+
+
 def limits_of(cfg: DictConfig) -> Limits:
     """``morphology.limits``: what a valid robot may not exceed."""
     return typed(Limits, cfg.morphology.limits, "morphology.limits")
@@ -78,7 +83,7 @@ def training_parts(cfg: DictConfig) -> TrainingParts:
     """
     return TrainingParts(
         physics=physics_of(cfg),
-        env=typed(EnvConfig, cfg.env, "env"),
+        env=env_of(cfg),
         learner=typed(LearnerConfig, cfg.learner, "learner"),
         record=typed(RecordConfig, cfg.record, "record"),
     )
@@ -112,6 +117,7 @@ __all__ = [
     "ConfigError",
     "TrainingParts",
     "compose_config",
+    "env_of",
     "executor_of",
     "generator_of",
     "limits_of",

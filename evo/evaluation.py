@@ -51,8 +51,8 @@ class Job:
 
 
 @dataclass(frozen=True, slots=True)
-class Task:
-    """One robot to evaluate.
+class Candidate:
+    """One robot to evaluate (a candidate structure of the run).
 
     Attributes:
         birth: Birth order in the run (0-based).
@@ -99,16 +99,16 @@ class Outcome:
     """The early-rejection rule's last prediction of the final fitness."""
 
 
-def outcome_of(future: Future[Outcome], task: Task, executor: EvalExecutor) -> Outcome:
+def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
     """The outcome of a finished ``evaluate`` future; a crashed worker (the pool is
     restarted) or an exception outside ``evaluate`` becomes an outcome with the error."""
     try:
         return future.result()
     except BrokenProcessPool:
         executor.restart()
-        return Outcome(task.birth, task.name, error="the worker process died")
+        return Outcome(candidate.birth, candidate.name, error="the worker process died")
     except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
-        return Outcome(task.birth, task.name, error=f"{type(err).__name__}: {err}")
+        return Outcome(candidate.birth, candidate.name, error=f"{type(err).__name__}: {err}")
 
 
 class EpisodeSampler:
@@ -150,66 +150,68 @@ def to_episode(trajectory: Trajectory, index: int, env_step: int) -> Episode:
                    rewards=trajectory.rewards, success=trajectory.success)
 
 
-def evaluate(task: Task, job: Job) -> Outcome:
-    """Train ``task``'s robot for its budget; write ``evals/<name>.pt``, ``.csv`` and the
+def evaluate(candidate: Candidate, job: Job) -> Outcome:
+    """Train ``candidate``'s robot for its budget; write ``evals/<name>.pt``, ``.csv`` and the
     recordings (``.mcap``, ``.rrd``) the record config asks for."""
 
     start = time.perf_counter()
     try:
-        robot = parse_robot(json.loads(task.robot), source=task.name)
-        outcome = _train_and_record(robot, task, job, start)
+        robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
+        outcome = _train_and_record(robot, candidate, job, start)
     except Exception:  # noqa: BLE001 - any failure is recorded and the run goes on
-        return Outcome(task.birth, task.name, wall_seconds=time.perf_counter() - start,
+        return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
                        error=traceback.format_exc(limit=8))
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 
-def _train_and_record(robot: Robot, task: Task, job: Job, start: float) -> Outcome:
+def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float) -> Outcome:
     evals = Path(job.run_dir) / "evals"
     evals.mkdir(parents=True, exist_ok=True)
     model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
     metadata = {
-        "robot": task.robot, "config": job.config_yaml, "seed": task.seed,
-        "method": job.method, "birth": task.birth, "budget": task.budget,
-        "parents": list(task.parents), "replay_seed": task.seed,
+        "robot": candidate.robot, "config": job.config_yaml, "seed": candidate.seed,
+        "method": job.method, "birth": candidate.birth, "budget": candidate.budget,
+        "parents": list(candidate.parents), "replay_seed": candidate.seed,
     }
-    rule = (StoppingRule(job.early, task.budget, _population_minimum(Path(job.run_dir),
-                                                                     task.threshold))
-            if job.early.enabled and math.isfinite(task.threshold) else None)
+    rule = (StoppingRule(job.early, candidate.budget, _population_minimum(Path(job.run_dir),
+                                                                     candidate.threshold))
+            if job.early.enabled and math.isfinite(candidate.threshold) else None)
     with ExitStack() as stack:
         with critical():  # a signal here waits until the recorder is on the stack
             recorder = stack.enter_context(
-                open_recorder(job.record, evals, task.name, model, metadata))
+                open_recorder(job.record, evals, candidate.name, model, metadata))
 
         def on_curve(row: dict[str, float]) -> bool:
             recorder.curve(row)
             elapsed = time.perf_counter() - start
             if job.timeout_s > 0 and elapsed > job.timeout_s:
                 raise EvaluationTimeout(
-                    f"{task.name}: timed out after {elapsed:.1f} s at {row['env_steps']:.0f} "
-                    f"of {task.budget} env steps (ga.eval_timeout_s = {job.timeout_s:g})"
+                    f"{candidate.name}: timed out after {elapsed:.1f} s at {row['env_steps']:.0f} "
+                    f"of {candidate.budget} env steps (ga.eval_timeout_s = {job.timeout_s:g})"
                 )
             return rule is not None and rule(row)
 
         sampler = EpisodeSampler(recorder, job.record)
         result = get_learner(job.learner)(
-            robot, physics=job.physics, env=job.env, config=job.learner, budget=task.budget,
-            seed=task.seed, on_curve=on_curve,
+            robot, physics=job.physics, env=job.env, config=job.learner, budget=candidate.budget,
+            seed=candidate.seed, on_curve=on_curve,
             on_episode=sampler if job.record.enabled else None,
         )
         sampler.finish()
         if job.record.enabled:  # one deterministic episode, as `evo.replay` re-plays it
             _, (final,) = play(robot, result.policy, physics=job.physics, env=job.env,
-                               seed=task.seed)
+                               seed=candidate.seed)
             recorder.episode(to_episode(final, sampler.count, result.env_steps))
-        result.curve.to_csv(evals / f"{task.name}.csv", index=False)
-        save_checkpoint(result.policy, evals / f"{task.name}.pt", job.learner, robot=robot.hash)
+        result.curve.to_csv(evals / f"{candidate.name}.csv", index=False)
+        save_checkpoint(result.policy, evals / f"{candidate.name}.pt", job.learner,
+                        robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
                         "episodes": result.episodes, "predicted": predicted,
                         "status": "stopped-early" if result.stopped_early else "complete"})
-    return Outcome(task.birth, task.name, fitness=result.fitness, env_steps=result.env_steps,
-                   episodes=result.episodes, extra={"unstable": float(result.unstable)},
+    return Outcome(candidate.birth, candidate.name, fitness=result.fitness,
+                   env_steps=result.env_steps, episodes=result.episodes,
+                   extra={"unstable": float(result.unstable)},
                    stopped_early=result.stopped_early, predicted=predicted)
 
 

@@ -34,14 +34,8 @@ import numpy as np
 import pandas as pd
 
 from evo.components.executors import EvalExecutor
-from evo.components.ga import (
-    BudgetSchedule,
-    Member,
-    Offspring,
-    ReplaceWorst,
-    StructureStrategy,
-)
-from evo.evaluation import Job, Outcome, Task, evaluate, outcome_of
+from evo.components.ga import GAConfig, Member, Offspring, StructureStrategy
+from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
 from evo.history import HISTORY_COLUMNS, HistoryRow
 from evo.interrupt import critical
 from evo.record import RecordConfig
@@ -55,32 +49,6 @@ from evo.rundir import write_csv, write_json
 STATE_VERSION = 1
 RANDOM_FALLBACK = "random-fallback"
 """History ``operator`` of a random robot made because breeding found no valid child."""
-
-
-@dataclass(frozen=True, slots=True)
-class GAConfig:
-    """Sizes of the run.
-
-    Attributes:
-        population_size: Robots in the population (the initial ones are random).
-        robot_budget: Robots evaluated in all, initial ones included.
-        eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
-    """
-
-    population_size: int = 20
-    robot_budget: int = 100
-    eval_timeout_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.population_size < 2:
-            raise ValueError(f"population_size must be >= 2, got {self.population_size}")
-        if self.robot_budget < self.population_size:
-            raise ValueError(
-                f"robot_budget ({self.robot_budget}) must be >= population_size "
-                f"({self.population_size})"
-            )
-        if self.eval_timeout_s < 0:
-            raise ValueError(f"eval_timeout_s must be >= 0 (0 = none), got {self.eval_timeout_s}")
 
 
 def evaluation_seed(seed: int, birth: int) -> int:
@@ -101,22 +69,19 @@ class Evolution:
         *,
         ga: GAConfig,
         strategy: StructureStrategy,
-        replacement: ReplaceWorst,
-        schedule: BudgetSchedule,
         job: Job,
         executor: EvalExecutor,
         seed: int,
         on_result: Callable[[HistoryRow], None] | None = None,
-        evaluate: Callable[[Task, Job], Outcome] = evaluate,
+        evaluate: Callable[[Candidate, Job], Outcome] = evaluate,
     ) -> None:
-        self.run_dir, self.ga, self.strategy = run_dir, ga, strategy
-        self.replacement, self.schedule, self.job = replacement, schedule, job
+        self.run_dir, self.ga, self.strategy, self.job = run_dir, ga, strategy, job
         self.executor, self.seed, self.on_result = executor, seed, on_result
         self.evaluate = evaluate  # a module-level function: executors pickle it
         self.rng = np.random.default_rng(seed)
         self.population: list[Member] = []
         self.history: list[HistoryRow] = []
-        self.pending: list[Task] = []  # submitted, not yet recorded
+        self.pending: list[Candidate] = []  # submitted, not yet recorded
         self.next_birth = 0
         self.wall_before = 0.0
         self.started = time.perf_counter()
@@ -132,31 +97,31 @@ class Evolution:
         (self.run_dir / "robots").mkdir(parents=True, exist_ok=True)
         if not (self.run_dir / "state.json").exists():
             self._save()  # a new run has a state from its first moment
-        running: dict[Future[Outcome], Task] = {}
+        running: dict[Future[Outcome], Candidate] = {}
         try:
-            for task in self.pending:  # in flight when a previous session stopped
-                running[self.executor.submit(self.evaluate, task, self.job)] = task
+            for candidate in self.pending:  # in flight when a previous session stopped
+                running[self.executor.submit(self.evaluate, candidate, self.job)] = candidate
             while True:
                 while len(running) < self.executor.workers and self._can_submit(running):
                     with critical():
-                        task = self._next_task(running)
-                        self.pending.append(task)
+                        candidate = self._next_candidate(running)
+                        self.pending.append(candidate)
                         self._save()
-                    running[self.executor.submit(self.evaluate, task, self.job)] = task
+                    running[self.executor.submit(self.evaluate, candidate, self.job)] = candidate
                 if not running:
                     break
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in done:
-                    task = running.pop(future)
+                    candidate = running.pop(future)
                     with critical():
-                        self._record(task, outcome_of(future, task, self.executor))
+                        self._record(candidate, outcome_of(future, candidate, self.executor))
         except BaseException:
             self.executor.terminate()
             raise
         self.executor.shutdown()
         return self.summary()
 
-    def _can_submit(self, running: dict[Future[Outcome], Task]) -> bool:
+    def _can_submit(self, running: dict[Future[Outcome], Candidate]) -> bool:
         if self.next_birth >= self.ga.robot_budget:
             return False
         if len(self.population) >= self.ga.population_size:
@@ -164,7 +129,7 @@ class Evolution:
         initial_running = sum(1 for t in running.values() if not t.parents)
         return len(self.population) + initial_running < self.ga.population_size
 
-    def _next_task(self, running: dict[Future[Outcome], Task]) -> Task:
+    def _next_candidate(self, running: dict[Future[Outcome], Candidate]) -> Candidate:
         """Breed (or draw) the next robot and give it a unique name, budget and seed."""
         birth = self.next_birth
         if len(self.population) < self.ga.population_size:
@@ -186,11 +151,11 @@ class Evolution:
         )
         save_robot(offspring.robot, self.run_dir / "robots" / f"{name}.json")
         self.next_birth += 1
-        budget = self.schedule.budget(birth, self.ga.population_size, self.ga.robot_budget)
+        budget = self.ga.schedule.budget(birth, self.ga.population_size, self.ga.robot_budget)
         full = len(self.population) >= self.ga.population_size
         threshold = (min(m.fitness for m in self.population)
                      if self.job.early.enabled and full else math.nan)
-        return Task(
+        return Candidate(
             birth,
             name,
             offspring.robot.canonical_json(),
@@ -201,26 +166,27 @@ class Evolution:
             threshold,
         )
 
-    def _record(self, task: Task, outcome: Outcome) -> None:
+    def _record(self, candidate: Candidate, outcome: Outcome) -> None:
         """Apply replacement, append the history row, save the state."""
         accepted, replaced = False, ""
         if outcome.error is None and math.isfinite(outcome.fitness) and not outcome.stopped_early:
-            member = Member(task.name, load_robot(self._robot_path(task.name)), outcome.fitness)
-            if not task.parents and len(self.population) < self.ga.population_size:
+            robot = load_robot(self._robot_path(candidate.name))
+            member = Member(candidate.name, robot, outcome.fitness)
+            if not candidate.parents and len(self.population) < self.ga.population_size:
                 self.population.append(member)
                 accepted = True
             else:
-                gone = self.replacement.apply(self.population, member)
+                gone = self.ga.replacement.apply(self.population, member)
                 accepted, replaced = gone is not None, gone.name if gone else ""
         fitness = [m.fitness for m in self.population]
         row = HistoryRow(
-            birth=task.birth,
-            name=task.name,
+            birth=candidate.birth,
+            name=candidate.name,
             method=self.job.method,
-            parents=task.parents,
-            operator=task.operator,
-            budget=task.budget,
-            seed=task.seed,
+            parents=candidate.parents,
+            operator=candidate.operator,
+            budget=candidate.budget,
+            seed=candidate.seed,
             fitness=outcome.fitness,
             accepted=accepted,
             replaced=replaced,
@@ -235,7 +201,7 @@ class Evolution:
             predicted=outcome.predicted,
         )
         self.history.append(row)
-        self.pending = [t for t in self.pending if t.birth != task.birth]
+        self.pending = [t for t in self.pending if t.birth != candidate.birth]
         self._save()
         if self.on_result is not None:
             self.on_result(row)
@@ -326,7 +292,7 @@ class SavedState:
     rng: dict[str, Any]
     population: list[Member]
     history: list[HistoryRow]
-    pending: list[Task]
+    pending: list[Candidate]
     wall_seconds: float
 
 
@@ -355,7 +321,7 @@ def load_state(run_dir: Path) -> SavedState:
             raise ValueError(f"state version {version!r}, expected {STATE_VERSION}")
         np.random.default_rng().bit_generator.state = state["rng"]
         history = [HistoryRow.from_record(row) for row in state["history"]]
-        pending = [Task(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
+        pending = [Candidate(**{**t, "parents": tuple(t["parents"])}) for t in state["pending"]]
         fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
         saved = (int(state["seed"]), int(state["next_birth"]), float(state["wall_seconds"]))
         births = sorted([r.birth for r in history] + [t.birth for t in pending])

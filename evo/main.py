@@ -28,15 +28,8 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from evo.components.executors import EvalExecutor
-from evo.components.ga import (
-    BudgetSchedule,
-    Evolve,
-    RandomStructures,
-    ReplaceWorst,
-    StructureStrategy,
-)
-from evo.config import ConfigError, instantiate, typed
-from evo.early_rejection import EarlyRejection
+from evo.components.ga import GAConfig, StructureStrategy
+from evo.config import ConfigError, typed
 from evo.edge import (
     executor_of,
     generator_of,
@@ -46,7 +39,7 @@ from evo.edge import (
     warn_if_failures_cannot_end,
 )
 from evo.evaluation import Job
-from evo.evolution import Evolution, GAConfig, RunLog, SavedState, load_state
+from evo.evolution import Evolution, RunLog, SavedState, load_state
 from evo.history import HistoryRow
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.robot import (
@@ -118,25 +111,6 @@ def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         raise ConfigError(f"checkpoint: {err}") from None
 
 
-GA_KEYS = frozenset(
-    {
-        "population_size",
-        "robot_budget",
-        "structure",
-        "selection",
-        "replacement",
-        "schedule",
-        "crossover_tries",
-        "parent_tries",
-        "mutation_rate",
-        "mutation_operators",
-        "eval_timeout_s",
-        "early_rejection",
-    }
-)
-"""Every key of the ``ga`` group (conf/ga/steady_state.yaml)."""
-
-
 def method_label(structure: str, learns: bool) -> str:
     """The ablation's method name (paper section 8): ``E+L``, ``E+R``, ``R+L`` or ``R+R``."""
     return f"{structure}+{'L' if learns else 'R'}"
@@ -147,40 +121,12 @@ if not OmegaConf.has_resolver("evo_method"):
     OmegaConf.register_new_resolver("evo_method", method_label)
 
 
-def _strategy(cfg: DictConfig) -> StructureStrategy:
-    generator, limits = generator_of(cfg), limits_of(cfg)
-    g = cfg.ga
-    unknown = sorted(set(map(str, g.keys())) - GA_KEYS)
-    if unknown:
-        expected = ", ".join(sorted(GA_KEYS))
-        raise ConfigError(f"ga: unknown key(s) {', '.join(unknown)}; expected some of {expected}")
-    if g.structure == "R":
-        return RandomStructures(generator, limits)
-    if g.structure != "E":
-        raise ConfigError(f"ga.structure: expected E (evolve) or R (random), got {g.structure!r}")
-    options = {
-        k: g[k] for k in ("crossover_tries", "parent_tries", "mutation_rate", "mutation_operators")
-    }
-    return typed(
-        Evolve,
-        {
-            **options,
-            "generator": generator,
-            "limits": limits,
-            "selection": instantiate(g.selection, "ga.selection"),
-        },
-        "ga",
-    )
-
-
 @dataclass(frozen=True)
 class EvolveParts:
     """The typed objects an evolution run is made of (what ``task=evolve`` builds)."""
 
     ga: GAConfig
     strategy: StructureStrategy
-    replacement: ReplaceWorst
-    schedule: BudgetSchedule
     job: Job
     executor: EvalExecutor
 
@@ -193,25 +139,15 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     """
     parts = training_parts(cfg)
     learner = parts.learner
-    strategy = _strategy(cfg)
-    sizes = ("population_size", "robot_budget", "eval_timeout_s")
-    ga = typed(GAConfig, {k: cfg.ga[k] for k in sizes if k in cfg.ga}, "ga")
+    ga = typed(GAConfig, cfg.ga, "ga")
+    strategy = ga.strategy(generator_of(cfg), limits_of(cfg))
     method = method_label(strategy.code, learner.update)
-    early = typed(EarlyRejection, cfg.ga.get("early_rejection"), "ga.early_rejection")
     job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-              timeout_s=ga.eval_timeout_s, early=early)
-    replacement = instantiate(cfg.ga.replacement, "ga.replacement")
-    if not isinstance(replacement, ReplaceWorst):
-        raise ConfigError(f"ga.replacement: expected a ReplaceWorst, got {type(replacement)}")
-    schedule = instantiate(cfg.ga.schedule, "ga.schedule")
-    if not isinstance(schedule, BudgetSchedule):
-        raise ConfigError(f"ga.schedule: expected a BudgetSchedule, got {type(schedule)}")
-    smallest = min(schedule.budget(b, ga.population_size, ga.robot_budget)
-                   for b in range(ga.robot_budget))
-    warn_if_failures_cannot_end(smallest, "ga.schedule", learner, job.env)
+              timeout_s=ga.eval_timeout_s, early=ga.early_rejection)
+    warn_if_failures_cannot_end(min(ga.budgets()), "ga.schedule", learner, job.env)
     executor = executor_of(cfg)  # last: Ray starts here
-    return EvolveParts(ga, strategy, replacement, schedule, job, executor)
+    return EvolveParts(ga, strategy, job, executor)
 
 
 def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
@@ -231,8 +167,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     saved = _state_to_continue(out, resuming)
     if resuming:
         lock.claim()
-    budgets = [parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
-               for b in range(parts.ga.robot_budget)]
+    budgets = parts.ga.budgets()
     log: RunLog | None = None
     evolution: Evolution | None = None
     try:
@@ -247,10 +182,9 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                 assert log is not None
                 log(row)
 
-            evolution = Evolution(
-                out, ga=parts.ga, strategy=parts.strategy, replacement=parts.replacement,
-                schedule=parts.schedule, job=parts.job, executor=parts.executor,
-                seed=int(cfg.seed), on_result=on_result)
+            evolution = Evolution(out, ga=parts.ga, strategy=parts.strategy, job=parts.job,
+                                  executor=parts.executor, seed=int(cfg.seed),
+                                  on_result=on_result)
             if saved is not None:
                 evolution.resume(saved)
                 show.resumed(evolution.history)

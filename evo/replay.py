@@ -23,9 +23,10 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 
-from evo.config import ConfigError, typed
+from evo.config import ConfigError
+from evo.edge import env_of, physics_of
 from evo.envs.task import EnvConfig, Trajectory, observation_size
 from evo.learners.common import load_checkpoint
 from evo.learners.rollouts import play
@@ -41,8 +42,8 @@ def _run_config(run_dir: Path) -> tuple[PhysicsParams, EnvConfig]:
     if not path.is_file():
         raise ValueError(f"{path} not found; is {run_dir} an evo run directory?")
     cfg = OmegaConf.load(path)
-    physics = typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
-    return physics, typed(EnvConfig, cfg.env, "env")
+    assert isinstance(cfg, DictConfig)
+    return physics_of(cfg), env_of(cfg)
 
 
 def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
@@ -166,7 +167,7 @@ def replay(
     if video is not None:
         print(f"video: {write_video(core.model, played, video)}")
     if rrd is not None:
-        from evo.record.replay import write_replay_rrd
+        from evo.record.playback import write_replay_rrd
 
         print(f"rerun: {write_replay_rrd(core.model, robot, played, rrd)}")
     return played

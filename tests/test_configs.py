@@ -24,11 +24,17 @@ from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 
 from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
-from evo.components.ga import BudgetSchedule, Evolve, RandomStructures, ReplaceWorst, Roulette
+from evo.components.ga import (
+    BudgetSchedule,
+    Evolve,
+    GAConfig,
+    RandomStructures,
+    ReplaceWorst,
+    Roulette,
+)
 from evo.config import ConfigError, typed
 from evo.edge import physics_of, warn_if_failures_cannot_end
 from evo.envs.task import EnvConfig
-from evo.evolution import GAConfig
 from evo.learners.common import LearnerConfig
 from evo.main import (
     TASKS,
@@ -68,8 +74,8 @@ def build(cfg: DictConfig, out: Path) -> EvolveParts:
     parts = evolve_parts(cfg, out)
     assert isinstance(parts.ga, GAConfig)
     assert isinstance(parts.strategy, Evolve | RandomStructures)
-    assert isinstance(parts.replacement, ReplaceWorst)
-    assert isinstance(parts.schedule, BudgetSchedule)
+    assert isinstance(parts.ga.replacement, ReplaceWorst)
+    assert isinstance(parts.ga.schedule, BudgetSchedule)
     assert isinstance(parts.job.learner, LearnerConfig)
     assert isinstance(parts.job.env, EnvConfig)
     assert parts.job.run_dir == str(out)
@@ -148,7 +154,7 @@ def parts_of(experiment: str, out: Path, *overrides: str) -> EvolveParts:
 def test_paper_experiments(hydra_conf: None, tmp_path: Path, experiment: str, arena: int) -> None:
     parts = parts_of(experiment, tmp_path)
     assert (parts.ga.population_size, parts.ga.robot_budget) == (20, 100)
-    budgets = [parts.schedule.budget(b, 20, 100) for b in range(100)]
+    budgets = [parts.ga.schedule.budget(b, 20, 100) for b in range(100)]
     assert budgets[:21] == [50_000] * 21 and budgets[99] == 250_000
     assert budgets == sorted(budgets)
     assert parts.job.learner.num_envs >= 12 and parts.job.learner.update
@@ -161,11 +167,11 @@ def test_paper_experiments(hydra_conf: None, tmp_path: Path, experiment: str, ar
 
 def test_smoke_and_demo_are_small_evolutions(hydra_conf: None, tmp_path: Path) -> None:
     smoke = parts_of("smoke", tmp_path)
-    assert smoke.ga.robot_budget <= 10 and smoke.schedule.budget(7, 4, 8) <= 5_000
+    assert smoke.ga.robot_budget <= 10 and smoke.ga.schedule.budget(7, 4, 8) <= 5_000
     demo = parts_of("demo", tmp_path)
     size, total = demo.ga.population_size, demo.ga.robot_budget
     assert size >= 4 and total >= 2 * size, "the demo breeds at least as many as it draws"
-    budgets = [demo.schedule.budget(b, size, total) for b in range(total)]
+    budgets = [demo.ga.schedule.budget(b, size, total) for b in range(total)]
     assert min(budgets) >= 20_000 and max(budgets) <= 250_000 and budgets == sorted(budgets)
     # About ten minutes on 2 cores at the ~5,000 env steps/s two workers reach.
     assert sum(budgets) <= 3_000_000, sum(budgets)
@@ -214,7 +220,7 @@ def test_ablation_is_a_multirun_of_the_four_methods(
         job_cfg = compose("config", overrides=overrides, return_hydra_config=True)
         assert job_cfg.hydra.sweep.subdir == f"{parts.job.method}_seed{job_cfg.seed}"
         budgets = {
-            parts.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
+            parts.ga.schedule.budget(b, parts.ga.population_size, parts.ga.robot_budget)
             for b in range(parts.ga.robot_budget)
         }
         assert len(budgets) == 1, "every robot of the ablation gets the same budget"

@@ -26,7 +26,7 @@ from test_evolution import (
 
 from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
 from evo.envs.task import EnvConfig, TaskParams
-from evo.evaluation import Job, Outcome, Task, evaluate
+from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.learners.common import LearnerConfig
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -114,9 +114,9 @@ TINY_LEARNER = LearnerConfig(num_envs=4, rollout_steps=64, epochs=1, minibatch_s
                              hidden=(32, 32))
 
 
-def real_task(threshold: float) -> Task:
+def real_candidate(threshold: float) -> Candidate:
     robot = load_robot("robots/four_wheeler.json")
-    return Task(5, robot.name, robot.canonical_json(), 2560, 11, ("a", "b"), "crossover",
+    return Candidate(5, robot.name, robot.canonical_json(), 2560, 11, ("a", "b"), "crossover",
                 threshold)
 
 
@@ -125,12 +125,12 @@ def test_a_real_training_stops_only_when_it_cannot_win(
     tmp_path: Path, threshold: float, stops: bool
 ) -> None:
     job = Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path), early=RULE)
-    outcome = evaluate(real_task(threshold), job)
+    outcome = evaluate(real_candidate(threshold), job)
     assert outcome.error is None, outcome.error
     assert outcome.stopped_early is stops
     if stops:  # the first batch at or past 20 % of 2,560 steps: the 2nd of 256 steps
         assert outcome.env_steps == 512 and math.isfinite(outcome.predicted)
-        curve = pd.read_csv(tmp_path / "evals" / f"{real_task(threshold).name}.csv")
+        curve = pd.read_csv(tmp_path / "evals" / f"{real_candidate(threshold).name}.csv")
         assert curve["env_steps"].max() == 512
     else:
         assert outcome.env_steps >= 2560
@@ -142,11 +142,11 @@ def test_a_real_training_stops_only_when_it_cannot_win(
 def test_a_stopped_offspring_never_enters_the_population(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def stops_every_third(task: Task, job: Job) -> Outcome:
-        outcome = fake_evaluate(task, job)
-        if task.parents and task.birth % 3 == 0:
-            assert math.isfinite(task.threshold), "an offspring knows what it must beat"
-            return dataclasses.replace(outcome, fitness=9.0, env_steps=task.budget // 5,
+    def stops_every_third(candidate: Candidate, job: Job) -> Outcome:
+        outcome = fake_evaluate(candidate, job)
+        if candidate.parents and candidate.birth % 3 == 0:
+            assert math.isfinite(candidate.threshold), "an offspring knows what it must beat"
+            return dataclasses.replace(outcome, fitness=9.0, env_steps=candidate.budget // 5,
                                        stopped_early=True, predicted=8.5)
         return outcome
 

@@ -34,14 +34,15 @@ from evo.components.executors import LocalExecutor, SerialExecutor
 from evo.components.ga import (
     BudgetSchedule,
     Evolve,
+    GAConfig,
     Offspring,
     RandomStructures,
     ReplaceWorst,
     Roulette,
 )
 from evo.envs.task import EnvConfig
-from evo.evaluation import Job, Outcome, Task, evaluate
-from evo.evolution import Evolution, GAConfig, evaluation_seed
+from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evolution import Evolution, evaluation_seed
 from evo.history import HistoryRow
 from evo.learners.common import LearnerConfig
 from evo.robot import OperatorError, load_robot
@@ -54,26 +55,26 @@ SCHEDULE = BudgetSchedule(initial=100, first=200, last=1000)
 # ---- a fast stand-in for the evaluation ---------------------------------------------------
 
 
-def fake_evaluate(task: Task, job: Job) -> Outcome:
+def fake_evaluate(candidate: Candidate, job: Job) -> Outcome:
     """A fitness in [-1, 1] that depends only on the robot and the evaluation's seed."""
-    digest = hashlib.sha256(f"{task.robot}/{task.seed}".encode()).digest()
+    digest = hashlib.sha256(f"{candidate.robot}/{candidate.seed}".encode()).digest()
     fitness = int.from_bytes(digest[:4], "little") / 2**32 * 2 - 1
     return Outcome(
-        task.birth,
-        task.name,
+        candidate.birth,
+        candidate.name,
         fitness=fitness,
-        env_steps=task.budget,
+        env_steps=candidate.budget,
         episodes=3,
         wall_seconds=0.001,
     )
 
 
-def dies_on_birth_3(task: Task, job: Job) -> Outcome:
+def dies_on_birth_3(candidate: Candidate, job: Job) -> Outcome:
     """The evaluation of birth 3 kills its worker process (run in a process pool)."""
-    if task.birth == 3:
+    if candidate.birth == 3:
         os._exit(13)
     time.sleep(0.05)
-    return fake_evaluate(task, job)
+    return fake_evaluate(candidate, job)
 
 
 class Crash(BaseException):
@@ -89,15 +90,13 @@ def make_evolution(
     seed: int = 3,
     executor: Any = None,
     on_result: Callable[[HistoryRow], None] | None = None,
-    evaluate: Callable[[Task, Job], Outcome] = fake_evaluate,
+    evaluate: Callable[[Candidate, Job], Outcome] = fake_evaluate,
 ) -> Evolution:
     strategy = Evolve(Roulette()) if structure == "E" else RandomStructures()
     return Evolution(
         run_dir,
-        ga=GAConfig(population, budget),
+        ga=GAConfig(population, budget, replacement=ReplaceWorst(), schedule=SCHEDULE),
         strategy=strategy,
-        replacement=ReplaceWorst(),
-        schedule=SCHEDULE,
         job=Job(PhysicsParams(), EnvConfig(), LearnerConfig(), str(run_dir), f"{structure}+L"),
         executor=executor or SerialExecutor(),
         seed=seed,
@@ -217,8 +216,8 @@ def test_the_same_seed_gives_the_same_run(tmp_path: Path) -> None:
 def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def unfinished_when_fit(task: Task, job: Job) -> Outcome:
-        outcome = fake_evaluate(task, job)  # fitness above 0: no episode ended
+    def unfinished_when_fit(candidate: Candidate, job: Job) -> Outcome:
+        outcome = fake_evaluate(candidate, job)  # fitness above 0: no episode ended
         return dataclasses.replace(outcome, episodes=0 if outcome.fitness > 0 else 3)
 
     summary = make_evolution(tmp_path / "some", evaluate=unfinished_when_fit).run()
@@ -226,18 +225,18 @@ def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
     finished = history[history["episodes"] > 0]
     assert (history["episodes"] == 0).any() and len(finished)
     assert summary["best_fitness"] == finished["fitness"].max() and not summary["best_note"]
-    summary = make_evolution(tmp_path / "none", evaluate=lambda task, job: dataclasses.replace(
-        fake_evaluate(task, job), episodes=0)).run()
+    summary = make_evolution(tmp_path / "none", evaluate=lambda candidate, job: dataclasses.replace(
+        fake_evaluate(candidate, job), episodes=0)).run()
     assert summary["best_robot"] and "no robot finished an episode" in summary["best_note"]
 
 
 def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def flaky(task: Task, job: Job) -> Outcome:
-        if task.birth in (1, 6):
-            raise RuntimeError(f"simulated crash of {task.name}")
-        return fake_evaluate(task, job)
+    def flaky(candidate: Candidate, job: Job) -> Outcome:
+        if candidate.birth in (1, 6):
+            raise RuntimeError(f"simulated crash of {candidate.name}")
+        return fake_evaluate(candidate, job)
 
     summary = make_evolution(tmp_path, population=4, budget=12, evaluate=flaky).run()
     history = read_history(tmp_path).set_index("birth")

@@ -33,7 +33,7 @@ from evo.components.ga import (
     Roulette,
 )
 from evo.envs.task import EnvConfig
-from evo.evaluation import Job, Outcome, Task, evaluate
+from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.learners.common import LearnerConfig
 from evo.record.readback import read_curve
 from evo.robot import GeneratorParams, Limits, Robot, parse_robot, random_robot
@@ -407,24 +407,25 @@ def tiny_job(run_dir: Path) -> Job:
     return Job(PhysicsParams(), EnvConfig(), TINY, str(run_dir))
 
 
-def tiny_tasks() -> list[Task]:
+def tiny_candidates() -> list[Candidate]:
     """One robot, trained for a single collector batch."""
     robot = random_robot(np.random.default_rng(4), GENERATOR, LIMITS)
-    return [Task(0, robot.name, robot.canonical_json(), 128, 1000)]
+    return [Candidate(0, robot.name, robot.canonical_json(), 128, 1000)]
 
 
-BROKEN = Task(0, "broken", json.dumps({"format": "evo.robot/1", "root": {"type": "motor"}}), 256, 1)
+BROKEN = Candidate(0, "broken", json.dumps({"format": "evo.robot/1", "root": {"type": "motor"}}),
+                   256, 1)
 
 
 def test_an_evaluation_past_its_time_limit_is_an_error_outcome(tmp_path: Path) -> None:
-    (task,) = tiny_tasks()
+    (candidate,) = tiny_candidates()
     job = dataclasses.replace(tiny_job(tmp_path), timeout_s=1e-6)
-    outcome = evaluate(dataclasses.replace(task, budget=10 * 128), job)
+    outcome = evaluate(dataclasses.replace(candidate, budget=10 * 128), job)
     assert outcome.error and "EvaluationTimeout" in outcome.error, outcome.error
     assert "timed out after" in outcome.error and "ga.eval_timeout_s" in outcome.error
     assert math.isnan(outcome.fitness)
     # Stopped after its first batch, and the recording of that batch was kept.
-    curve = read_curve(tmp_path / "evals" / f"{task.name}.mcap")
+    curve = read_curve(tmp_path / "evals" / f"{candidate.name}.mcap")
     assert curve["env_steps"].tolist() == [128.0]
 
 
@@ -439,7 +440,7 @@ def test_an_unsimulatable_robot_is_an_error_outcome(tmp_path: Path) -> None:
 def serial_outcomes(tmp_path_factory: pytest.TempPathFactory) -> list[Outcome]:
     run_dir = tmp_path_factory.mktemp("serial")
     executor = SerialExecutor()
-    return [executor.submit(evaluate, t, tiny_job(run_dir)).result() for t in tiny_tasks()]
+    return [executor.submit(evaluate, t, tiny_job(run_dir)).result() for t in tiny_candidates()]
 
 
 def same_results(a: list[Outcome], b: list[Outcome]) -> None:
@@ -455,7 +456,7 @@ def test_local_executor_gives_the_serial_fitness_and_survives_a_dead_worker(
 ) -> None:
     executor = LocalExecutor(workers=1)
     try:
-        futures = [executor.submit(evaluate, t, tiny_job(tmp_path)) for t in tiny_tasks()]
+        futures = [executor.submit(evaluate, t, tiny_job(tmp_path)) for t in tiny_candidates()]
         same_results(serial_outcomes, [f.result(timeout=120) for f in futures])
         pid = executor.submit(os.getpid).result(timeout=60)
         # A worker dies: every evaluation in flight reports it, each followed by a
@@ -472,8 +473,8 @@ def test_local_executor_gives_the_serial_fitness_and_survives_a_dead_worker(
     finally:
         executor.shutdown()
     assert all(math.isfinite(o.fitness) for o in serial_outcomes)
-    for task in tiny_tasks():
-        assert (tmp_path / "evals" / f"{task.name}.pt").is_file()
+    for candidate in tiny_candidates():
+        assert (tmp_path / "evals" / f"{candidate.name}.pt").is_file()
 
 
 @pytest.mark.slow
@@ -485,8 +486,8 @@ def test_ray_executor_gives_the_serial_fitness(
     try:
         executor = RayExecutor()
         assert executor.workers == 2, "one evaluation per CPU of the local instance"
-        futures = [executor.submit(evaluate, t, tiny_job(tmp_path)) for t in tiny_tasks()]
-        same_results(serial_outcomes, [f.result(timeout=180) for f in futures])
+        futures = [executor.submit(evaluate, t, tiny_job(tmp_path)) for t in tiny_candidates()]
+        same_results(serial_outcomes, [f.result(timeout=600) for f in futures])  # slow when busy
         # A failing evaluation comes back as an error outcome, any other error raises.
         outcome = executor.submit(evaluate, BROKEN, tiny_job(tmp_path)).result(timeout=60)
         assert outcome.error and math.isnan(outcome.fitness)

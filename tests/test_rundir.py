@@ -142,7 +142,7 @@ def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
 ) -> None:
     """A real SIGINT, sent by the process to itself at ``moment``, is held back until
     the files are safe: the evaluation then stops and every recording reads back."""
-    from test_early_rejection import NEAR, TINY_LEARNER, real_task
+    from test_early_rejection import NEAR, TINY_LEARNER, real_candidate
 
     from evo.evaluation import Job, evaluate
     from evo.interrupt import Interrupted, handle_signals
@@ -157,13 +157,13 @@ def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
         return original(*args, **kwargs)
 
     monkeypatch.setattr(owner, name, signalled)
-    task = real_task(float("-inf"))
+    candidate = real_candidate(float("-inf"))
     with handle_signals(), pytest.raises(Interrupted):
-        evaluate(task, Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
+        evaluate(candidate, Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
     files = sorted(p.name for p in (tmp_path / "evals").iterdir())
-    assert f"{task.name}.mcap" in files and f"{task.name}.rrd" in files, files
+    assert f"{candidate.name}.mcap" in files and f"{candidate.name}.rrd" in files, files
     assert unreadable_files(tmp_path) == []
-    status = read_metadata(tmp_path / "evals" / f"{task.name}.mcap").get("status")
+    status = read_metadata(tmp_path / "evals" / f"{candidate.name}.mcap").get("status")
     assert status == ("complete" if moment.startswith("closing") else "failed")
 
 

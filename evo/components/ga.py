@@ -24,6 +24,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
     GeneratorParams,
@@ -231,3 +232,72 @@ class Evolve:
                 operator = "crossover+mutation"
             return Offspring(child, (a.name, b.name), operator)
         raise OperatorError(f"no valid offspring from {self.parent_tries} parent pairs")
+
+
+# ---- the ga config group ----------------------------------------------------------------
+
+STRUCTURES = {"E": "evolve by crossover", "R": "a fresh random robot each time"}
+"""Structure strategy codes (``ga.structure``), the letter before ``+`` in a method name."""
+
+
+@dataclass(frozen=True, slots=True)
+class GAConfig:
+    """The ``ga`` config group (``conf/ga/steady_state.yaml``), whole.
+
+    Attributes:
+        population_size: Robots in the population (the initial ones are random).
+        robot_budget: Robots evaluated in all, initial ones included.
+        structure: Structure strategy, a key of :data:`STRUCTURES`.
+        selection: How parents are chosen (``E``).
+        replacement: Steady-state replacement.
+        schedule: Training budget of every evaluation.
+        crossover_tries: Swaps tried per parent pair before a new pair is drawn (``E``).
+        parent_tries: Parent pairs tried before breeding gives up (``E``).
+        mutation_rate: Probability an offspring is also mutated (``E``; 0 in the paper).
+        mutation_operators: Which mutation operators may be used (``E``).
+        eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
+        early_rejection: When an offspring's training may stop early.
+    """
+
+    population_size: int = 20
+    robot_budget: int = 100
+    structure: str = "E"
+    selection: Roulette = field(default_factory=Roulette)
+    replacement: ReplaceWorst = field(default_factory=ReplaceWorst)
+    schedule: BudgetSchedule = field(default_factory=BudgetSchedule)
+    crossover_tries: int = 100
+    parent_tries: int = 20
+    mutation_rate: float = 0.0
+    mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
+    eval_timeout_s: float = 0.0
+    early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
+
+    def __post_init__(self) -> None:
+        if self.population_size < 2:
+            raise ValueError(f"population_size must be >= 2, got {self.population_size}")
+        if self.robot_budget < self.population_size:
+            raise ValueError(
+                f"robot_budget ({self.robot_budget}) must be >= population_size "
+                f"({self.population_size})"
+            )
+        if self.eval_timeout_s < 0:
+            raise ValueError(f"eval_timeout_s must be >= 0 (0 = none), got {self.eval_timeout_s}")
+        if self.structure not in STRUCTURES:
+            raise ValueError(f"structure: expected E (evolve) or R (random), got "
+                             f"{self.structure!r}")
+        self.strategy()  # the strategy's own checks (mutation_rate, ...) at start
+
+    def strategy(self, generator: GeneratorParams | None = None,
+                 limits: Limits | None = None) -> StructureStrategy:
+        """The structure strategy ``structure`` names, making robots with ``generator``
+        within ``limits`` (the ``morphology`` group; defaults when None)."""
+        generator, limits = generator or GeneratorParams(), limits or Limits()
+        if self.structure == "R":
+            return RandomStructures(generator, limits)
+        return Evolve(self.selection, generator, limits, self.crossover_tries,
+                      self.parent_tries, self.mutation_rate, self.mutation_operators)
+
+    def budgets(self) -> list[int]:
+        """The training budget of every robot of the run, in birth order."""
+        return [self.schedule.budget(b, self.population_size, self.robot_budget)
+                for b in range(self.robot_budget)]

@@ -23,6 +23,7 @@ from evo.record.config import EpisodeChoice, RecordConfig, open_recorder, should
 if TYPE_CHECKING:
     from evo.record.geometry import Geometry, scene_geometry
     from evo.record.mcap_file import McapRecorder, RecordError
+    from evo.record.playback import write_replay_rrd
     from evo.record.readback import (
         is_complete,
         read_curve,
@@ -30,7 +31,6 @@ if TYPE_CHECKING:
         read_json_topic,
         read_metadata,
     )
-    from evo.record.replay import write_replay_rrd
     from evo.record.rrd import RerunRecorder
     from evo.record.run import Birth, RunRecorder, read_births
 
@@ -45,7 +45,7 @@ _LAZY = {
     "read_json_topic": "evo.record.readback",
     "read_metadata": "evo.record.readback",
     "RerunRecorder": "evo.record.rrd",
-    "write_replay_rrd": "evo.record.replay",
+    "write_replay_rrd": "evo.record.playback",
     "Birth": "evo.record.run",
     "RunRecorder": "evo.record.run",
     "read_births": "evo.record.run",
