@@ -15,8 +15,9 @@ from torchrl.envs.utils import check_env_specs
 
 import evo.envs
 from evo.envs.arena import ArenaParams
+from evo.envs.params import REWARD_TERMS, TaskParams
 from evo.envs.reach import ReachEnv
-from evo.envs.task import REWARD_TERMS, ReachCore, TaskParams
+from evo.envs.task import ReachCore
 from evo.robot import Robot, load_robot
 
 EXAMPLES = ["four_wheeler", "inchworm", "snake", "twisted_four_wheeler"]

@@ -11,7 +11,8 @@ import pandas as pd
 import pytest
 import torch
 
-from evo.envs.task import EnvConfig, TaskParams
+from evo.envs.params import TaskParams, observation_size
+from evo.envs.task import EnvConfig
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, load_checkpoint, make_policy, save_checkpoint
 from evo.learners.ppo import train as train_ppo
@@ -20,6 +21,7 @@ from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
 
 FOUR_WHEELER = load_robot("robots/four_wheeler.json")
+OBS = observation_size(FOUR_WHEELER, TaskParams())
 PHYSICS = PhysicsParams()
 # A shorter task than the paper's (nearer targets, 200-step episodes) so that learning
 # shows within a test-sized budget; the full task is exercised by bench/train_throughput.py.
@@ -100,9 +102,9 @@ def test_same_seed_same_curve_different_seed_different_curve() -> None:
 def test_reloaded_checkpoint_acts_identically(ppo_run, tmp_path: Path) -> None:  # noqa: ANN001
     path = save_checkpoint(ppo_run.policy, tmp_path / "policy.pt", SMALL)
     state = torch.load(path, weights_only=True)  # the checkpoint is plain tensors and numbers
-    assert state["obs_size"] == FOUR_WHEELER.obs_size
+    assert state["obs_size"] == OBS
     loaded = load_checkpoint(path)
-    obs = torch.randn(64, FOUR_WHEELER.obs_size) * 3
+    obs = torch.randn(64, OBS) * 3
     torch.testing.assert_close(
         loaded.mean_action(obs), ppo_run.policy.mean_action(obs), rtol=0, atol=0
     )
@@ -120,7 +122,7 @@ def test_bad_checkpoint_is_named(tmp_path: Path) -> None:
 def test_random_learner_never_changes_its_weights(ppo_run, random_run) -> None:  # noqa: ANN001
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(1)
-        initial = make_policy(FOUR_WHEELER.obs_size, FOUR_WHEELER.action_size, SMALL)
+        initial = make_policy(OBS, FOUR_WHEELER.n_actuators, SMALL)
     start, after_random = initial.state_dict(), random_run.policy.state_dict()
     for part in ("actor", "critic"):
         for key, value in start[part].items():
@@ -136,7 +138,7 @@ def test_mean_action_is_the_deterministic_action(ppo_run) -> None:  # noqa: ANN0
     from tensordict import TensorDict
     from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-    obs = torch.randn(32, FOUR_WHEELER.obs_size) * 3
+    obs = torch.randn(32, OBS) * 3
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         actor = ppo_run.policy.actor(TensorDict({"observation": obs}, batch_size=[32]))
     torch.testing.assert_close(ppo_run.policy.mean_action(obs), actor["action"], rtol=0, atol=0)

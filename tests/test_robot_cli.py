@@ -250,7 +250,7 @@ def test_mjcf_output_compiles(tmp_path: Path) -> None:
     done = cli("mjcf", FOUR_WHEELER)
     assert done.returncode == 0, done.stderr
     model = mujoco.MjModel.from_xml_string(done.stdout)
-    assert model.nu == robot.action_size
+    assert model.nu == robot.n_actuators
     assert model.body("brain").id > 0 and model.geom("floor").id >= 0
     data = mujoco.MjData(model)
     mujoco.mj_step(model, data, 20)

@@ -150,7 +150,7 @@ def test_actuators_are_the_motors_then_the_pivots() -> None:
         built = build(robot)
         model = built.compile()
         m, n = robot.n_motors, robot.n_pivots
-        assert model.nu == m + n == robot.action_size, robot.name
+        assert model.nu == m + n == robot.n_actuators, robot.name
         assert len(built.motors) == m and len(built.pivots) == n
         names = [model.actuator(i).name for i in range(model.nu)]
         assert names == list(built.actuators), "actuator order differs from the action order"

@@ -19,7 +19,7 @@ import evo.envs  # noqa: F401 - registers evo/Reach-v0
 from analysis.early_slope_report import main as early_slope_main
 from analysis.load import load_runs
 from analysis.report import main as report_main
-from evo.envs.task import TaskParams
+from evo.envs.params import TaskParams, observation_size
 from evo.learners.common import load_checkpoint
 from evo.replay import main as replay_main
 from evo.robot import load_robot
@@ -43,7 +43,7 @@ def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def two_robots(run_dir: Path) -> tuple[str, str]:
     """Two robots of the run with the same number of actuators."""
     history = pd.read_csv(run_dir / "history.csv")
-    sizes = {n: load_robot(run_dir / "robots" / f"{n}.json").action_size
+    sizes = {n: load_robot(run_dir / "robots" / f"{n}.json").n_actuators
              for n in history["name"]}
     for a in sizes:
         for b in sizes:
@@ -95,8 +95,9 @@ def test_a_checkpoint_stores_its_robot_and_sizes(run_dir: Path) -> None:
     robot = load_robot(run_dir / "robots" / f"{name}.json")
     state = torch.load(run_dir / "evals" / f"{name}.pt", weights_only=True)
     assert state["robot"] == robot.hash
-    assert (state["obs_size"], state["action_size"]) == (robot.obs_size, robot.action_size)
-    load_checkpoint(run_dir / "evals" / f"{name}.pt", robot=robot, obs_size=robot.obs_size)
+    obs_size = observation_size(robot, TaskParams())
+    assert (state["obs_size"], state["action_size"]) == (obs_size, robot.n_actuators)
+    load_checkpoint(run_dir / "evals" / f"{name}.pt", robot=robot, obs_size=obs_size)
 
 
 def test_replay_names_a_bad_checkpoint_and_a_missing_robot_name(

@@ -25,7 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 from evo.envs.arena import ArenaParams
-from evo.envs.task import ReachCore, TaskParams
+from evo.envs.params import TaskParams
+from evo.envs.task import ReachCore
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import load_robot
 from evo.robot.tree import Robot

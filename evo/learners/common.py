@@ -21,6 +21,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
+from evo.envs.params import action_size
 from evo.robot.tree import Robot
 
 
@@ -344,9 +345,9 @@ def load_checkpoint(path: Path, *, robot: Robot | None = None,
         if trained_on and trained_on != robot.hash:
             raise ValueError(f"{path}: trained on robot-{trained_on[:8]}, not on {robot.name}; "
                              "give the checkpoint of this robot")
-        if sizes[1] != robot.action_size:
+        if sizes[1] != action_size(robot):
             raise ValueError(f"{path}: the policy acts on {sizes[1]} actuators but "
-                             f"{robot.name} has {robot.action_size}")
+                             f"{robot.name} has {action_size(robot)}")
     if obs_size is not None and sizes[0] != obs_size:
         raise ValueError(f"{path}: the policy observes {sizes[0]} values but this env gives "
                          f"{obs_size}; run it with the env settings it was trained with "

@@ -34,8 +34,9 @@ from torchrl.collectors import Collector
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
+from evo.envs.params import REWARD_TERMS
 from evo.envs.reach import make_env
-from evo.envs.task import REWARD_TERMS, EnvConfig
+from evo.envs.task import EnvConfig
 from evo.learners import CurveHook, EpisodeHook
 from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams
@@ -167,7 +168,8 @@ def _train(
     if on_episode is not None:
         core = env.core
         core.watch(lambda episode: on_episode(episode, int(core.steps_taken)))
-    policy = make_policy(env.core.obs_size, env.core.action_size, config)
+    policy = make_policy(env.observation_spec["observation"].shape[-1],
+                         env.action_spec.shape[-1], config)  # sizes from the env specs
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     collector = Collector(

@@ -95,6 +95,8 @@ def _mutate(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
+    from evo.envs.params import TaskParams, action_size, observation_size  # the task's
+
     robot = load_robot(args.file)
     counts = ", ".join(f"{t.value} {robot.count(t)}" for t in ModuleType)
     print(f"name:        {robot.name}")
@@ -103,8 +105,8 @@ def _info(args: argparse.Namespace) -> int:
     print(f"depth:       {robot.depth}")
     print(f"motors m:    {robot.n_motors}")
     print(f"pivots n:    {robot.n_pivots}")
-    print(f"observation: {robot.obs_size}  (9 + 2(m + n))")
-    print(f"action:      {robot.action_size}  (m + n)")
+    print(f"observation: {observation_size(robot, TaskParams())}  (9 + 2(m + n))")
+    print(f"action:      {action_size(robot)}  (m + n)")
     return EXIT_OK
 
 

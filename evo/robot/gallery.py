@@ -9,6 +9,7 @@ import matplotlib.pyplot as plt
 from rich.console import Console
 from rich.table import Table
 
+from evo.envs.params import TaskParams, action_size, observation_size
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import ModuleType, Robot
@@ -29,8 +30,8 @@ def size_table(robots: Sequence[Robot]) -> Table:
             str(robot.count(ModuleType.MAIN)),
             str(robot.count(ModuleType.WHEEL)),
             str(robot.depth),
-            str(robot.obs_size),
-            str(robot.action_size),
+            str(observation_size(robot, TaskParams())),
+            str(action_size(robot)),
         )
     return table
 

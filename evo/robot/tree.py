@@ -283,13 +283,8 @@ class Robot:
         return self.count(ModuleType.PIVOT)
 
     @property
-    def obs_size(self) -> int:
-        """Observation size of the reach task, 9 + 2(m + n)."""
-        return 9 + 2 * (self.n_motors + self.n_pivots)
-
-    @property
-    def action_size(self) -> int:
-        """Action size of the reach task, m + n."""
+    def n_actuators(self) -> int:
+        """m + n: one actuator per motor and per pivot (motors first in the model)."""
         return self.n_motors + self.n_pivots
 
     @property

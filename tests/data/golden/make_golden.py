@@ -26,8 +26,10 @@ TINY = ["ga.population_size=3", "ga.robot_budget=6", "ga.schedule.initial=512",
 RUNS = {
     "paper_clean": ["+exp=paper_clean"],
     "paper_cluttered": ["+exp=paper_cluttered"],
-    "ablation_E+L": ["+exp=ablation", "hydra.mode=RUN", "ga.structure=E", "learner=ppo"],
-    "ablation_R+R": ["+exp=ablation", "hydra.mode=RUN", "ga.structure=R", "learner=random"],
+    "ablation_paper_E+L": ["+exp=ablation_paper", "hydra.mode=RUN", "ga.structure=E",
+                           "learner=ppo"],
+    "ablation_paper_R+R": ["+exp=ablation_paper", "hydra.mode=RUN", "ga.structure=R",
+                           "learner=random"],
 }
 COLUMNS = ["birth", "name", "method", "parents", "operator", "budget", "seed", "fitness",
            "accepted", "replaced", "env_steps", "episodes"]

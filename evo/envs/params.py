@@ -1,0 +1,61 @@
+"""The reach task's constants and sizes, without the simulator (SPEC section 3).
+
+What a robot's observation and action look like is the task's business, not the
+body's: a robot knows its motors and pivots (``Robot.n_actuators``); the reach task
+observes 9 + 2(m + n) numbers (+ 3 with ``observe_up``) and takes one command per
+actuator. Nothing here imports MuJoCo, so ``python -m evo.robot info`` can print the
+sizes on a machine without a working OpenGL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from evo.robot.tree import Robot
+
+REWARD_TERMS = ("time", "approach", "success")
+
+
+@dataclass(frozen=True, slots=True)
+class TaskParams:
+    """The reach task.
+
+    Attributes:
+        t_max: Control steps per episode before truncation.
+        frame_skip: Physics steps per control step (0.005 s x 10 = 20 Hz control).
+        success_radius: Success when any module is this close to the target
+            (horizontally), m.
+        target_min: Inner radius of the annulus the target is drawn from, m.
+        target_max: Outer radius of that annulus, m.
+        observe_up: Add gravity's direction in the brain frame to the observation.
+    """
+
+    t_max: int = 1000
+    frame_skip: int = 10
+    success_radius: float = 0.1
+    target_min: float = 0.5
+    target_max: float = 1.5
+    observe_up: bool = False
+
+    def __post_init__(self) -> None:
+        if self.t_max < 1 or self.frame_skip < 1:
+            raise ValueError(
+                f"t_max and frame_skip must be >= 1, got {self.t_max}, {self.frame_skip}"
+            )
+        if self.success_radius <= 0:
+            raise ValueError(f"success_radius must be positive, got {self.success_radius}")
+        if not 0 <= self.target_min <= self.target_max:
+            raise ValueError(
+                f"need 0 <= target_min <= target_max, got {self.target_min}, {self.target_max}"
+            )
+
+
+def observation_size(robot: Robot, task: TaskParams) -> int:
+    """Length of the reach task's observation for ``robot``: 9 + 2(m + n), + 3 with
+    ``observe_up``."""
+    return 9 + 2 * robot.n_actuators + (3 if task.observe_up else 0)
+
+
+def action_size(robot: Robot) -> int:
+    """Length of the reach task's action for ``robot``: one command per actuator, m + n."""
+    return robot.n_actuators
