@@ -27,6 +27,7 @@ import pandas as pd
 
 from analysis import noise_ceiling as nc
 from analysis.markdown import fmt_ci, markdown_table
+from analysis.plots import plot_noise_study
 
 SETTINGS: dict[str, tuple[str, ...]] = {
     # The paper's learner (ML-Agents' 12 areas, 128-step rollouts) and episodes of
@@ -99,16 +100,18 @@ def study_table(folders: Sequence[Path]) -> pd.DataFrame:
                 estimator=estimator, structures=int(m["n_structures"]),
                 **{metric: fmt_ci(m[metric], m[f"{metric}_low"], m[f"{metric}_high"], digits=2)
                    for metric in ("spearman", "icc", "top_quarter", "clears_baseline")},
-                rho=m["spearman"], steps_per_second=summary["steps_per_second"],
-                command=summary["command"]))
+                steps_per_second=summary["steps_per_second"], command=summary["command"],
+                **{f"{metric}_{part}": m[f"{metric}{end}"] for metric in ("spearman", "icc")
+                   for part, end in (("value", ""), ("low", "_low"), ("high", "_high"))}))
     table = pd.DataFrame(rows)
     if table.empty:
         return table
     return table.sort_values(["estimator", "budget", "settings"]).reset_index(drop=True)
 
 
-def table_markdown(table: pd.DataFrame) -> str:
-    """The study's Markdown: one table per estimator, then every cell's command."""
+def table_markdown(table: pd.DataFrame, notes: str = "", figure: str = "") -> str:
+    """The study's Markdown: ``notes`` (what the table says, written by hand), one table
+    per estimator, ``figure`` (a PNG beside the file) and every cell's command."""
     parts = ["# Fitness fidelity: budget × settings → noise ceiling\n\n",
              "Each cell trains the same random robots twice with independent seeds (and "
              "once with the random learner) through `python -m analysis.noise_ceiling`; "
@@ -116,6 +119,10 @@ def table_markdown(table: pd.DataFrame) -> str:
     for name in pd.unique(table["settings"]):
         overrides = " ".join(SETTINGS.get(name, ())) or "(learner and env defaults)"
         parts.append(f"- `{name}`: `{overrides}`\n")
+    if notes:
+        parts += ["\n", notes.strip(), "\n"]
+    if figure:
+        parts.append(f"\n![Spearman rho and ICC against budget (Eq. 8)]({figure})\n")
     for estimator, rows in table.groupby("estimator", sort=False):
         parts += [f"\n## {estimator}: {nc.ESTIMATORS.get(str(estimator), '')}\n\n",
                   markdown_table(rows[["budget", "settings", "structures", "spearman", "icc",
@@ -143,6 +150,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     tab.add_argument("folders", nargs="+", type=Path,
                      help="cell folders, or folders holding them")
     tab.add_argument("--out", type=Path, required=True, help="Markdown file to write")
+    tab.add_argument("--notes", type=Path, default=None,
+                     help="Markdown put after the settings (what the table shows)")
     args = cli.parse_args(argv)
     if args.verb == "run":
         return run(args.out, args.settings, args.budgets, random=args.random, seed=args.seed,
@@ -154,7 +163,10 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(table_markdown(table), encoding="utf-8")
+    figure = args.out.with_suffix(".png")
+    plot_noise_study(table[table["estimator"] == "fitness"], path=figure)
+    notes = args.notes.read_text(encoding="utf-8") if args.notes is not None else ""
+    args.out.write_text(table_markdown(table, notes, figure.name), encoding="utf-8")
     table.drop(columns=["command"]).to_csv(args.out.with_suffix(".csv"), index=False)
     print(f"table: {args.out}")
     return 0

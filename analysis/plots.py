@@ -332,3 +332,35 @@ def plot_seed_scatter(seeds: pd.DataFrame, baseline: pd.DataFrame, *,
     if len(baseline):
         axes[0].legend(fontsize="small", loc="upper left")
     return finish(fig, path)
+
+
+def plot_noise_study(table: pd.DataFrame, *, path: str | Path | None = None) -> Figure:
+    """Spearman rho and ICC (with 95 % CIs) against budget, one line per setting with
+    at least two budgets (:func:`analysis.noise_study.study_table`'s numeric columns).
+
+    Args:
+        table: Rows of one estimator with ``settings``, ``budget`` and, for ``spearman``
+            and ``icc``, ``<metric>_value``, ``<metric>_low`` and ``<metric>_high``.
+        path: PNG to write, or None.
+    """
+    require_columns(table, ("settings", "budget", *(f"{m}_{part}" for m in ("spearman", "icc")
+                                                   for part in ("value", "low", "high"))),
+                    "noise study table")
+    fig, axes = new_figure(2, width=4.8, height=3.6)
+    for ax, metric, label in zip(axes, ("spearman", "icc"), ("Spearman ρ across seeds",
+                                                            "ICC (share due to structure)"),
+                                 strict=True):
+        for name, rows in table.groupby("settings", sort=True):
+            rows = rows.sort_values("budget")
+            if len(rows) < 2:
+                continue
+            x = rows["budget"].to_numpy(dtype=float) / 1000
+            y = rows[f"{metric}_value"].to_numpy(dtype=float)
+            err = np.vstack([y - rows[f"{metric}_low"].to_numpy(dtype=float),
+                             rows[f"{metric}_high"].to_numpy(dtype=float) - y])
+            ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=str(name))
+        ax.axhline(0.8 if metric == "spearman" else 0.0, color="0.7", lw=1, ls="--")
+        ax.set_xlabel("budget per robot, thousand env steps")
+        ax.set_ylabel(label)
+        ax.legend(fontsize=8)
+    return finish(fig, path)

@@ -202,6 +202,7 @@ def test_the_study_table_gathers_cells(
     assert study_main(["table", str(out.parent), "--out", str(tmp_path / "t.md")]) == 0
     text = (tmp_path / "t.md").read_text()
     assert f"| {BUDGET} |" in text and "python -m analysis.noise_ceiling" in text
+    assert (tmp_path / "t.png").stat().st_size > 0 and "(t.png)" in text
     table = pd.read_csv(tmp_path / "t.csv")
     assert set(table["estimator"]) == set(nc.ESTIMATORS)
 
