@@ -23,16 +23,12 @@ from pathlib import Path
 
 import pandas as pd
 import torch
+from kill_resume import RUN as KILL_RESUME_RUN  # bench/ is on sys.path when this runs
 
 REPO = Path(__file__).resolve().parents[1]
-RUN = [
-    "+exp=smoke", "executor=serial", "ga.population_size=3", "ga.robot_budget=7",
-    "ga.schedule.initial=1024", "ga.schedule.first=1024", "ga.schedule.last=2048",
-    "learner.num_envs=4", "learner.rollout_steps=64", "learner.epochs=2",
-    "learner.minibatch_size=128", "learner.hidden=[32,32]", "env.task.t_max=40",
-    "record=off", "seed=5",
-]
-"""A small serial evolution: 7 robots of 1-2k env steps, crossover included."""
+RUN = [*KILL_RESUME_RUN, "record=off"]
+"""``bench/kill_resume.py``'s small serial evolution (7 robots of 1-2k env steps,
+crossover included), without recordings."""
 
 
 def run(tree: Path, run_dir: Path, overrides: list[str]) -> None:
