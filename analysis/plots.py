@@ -362,5 +362,6 @@ def plot_noise_study(table: pd.DataFrame, *, path: str | Path | None = None) -> 
         ax.axhline(0.8 if metric == "spearman" else 0.0, color="0.7", lw=1, ls="--")
         ax.set_xlabel("budget per robot, thousand env steps")
         ax.set_ylabel(label)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:  # a setting with two or more budgets
+            ax.legend(fontsize=8)
     return finish(fig, path)
