@@ -20,7 +20,7 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, evaluate
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig

@@ -18,7 +18,7 @@ from omegaconf import DictConfig
 
 from evo.components.executors import EvalExecutor
 from evo.config import ConfigError, instantiate, typed
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
 from evo.robot import GeneratorParams, Limits

@@ -21,7 +21,9 @@ from pathlib import Path
 
 from evo.components.executors import EvalExecutor
 from evo.early_rejection import EarlyRejection, StoppingRule
-from evo.envs.task import EnvConfig, Trajectory, build_scene
+from evo.envs.params import EnvConfig
+from evo.envs.scene import build_scene
+from evo.envs.task import Trajectory
 from evo.interrupt import critical
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, save_checkpoint

@@ -27,8 +27,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from evo.config import ConfigError
 from evo.edge import env_of, physics_of
-from evo.envs.params import observation_size
-from evo.envs.task import EnvConfig, Trajectory
+from evo.envs.params import EnvConfig, observation_size
+from evo.envs.task import Trajectory
 from evo.learners.common import load_checkpoint
 from evo.learners.rollouts import play
 from evo.robot.builder import PhysicsParams

@@ -34,7 +34,7 @@ from evo.components.ga import (
 )
 from evo.config import ConfigError, typed
 from evo.edge import physics_of, warn_if_failures_cannot_end
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
 from evo.main import (
     TASKS,

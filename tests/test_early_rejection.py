@@ -25,8 +25,7 @@ from test_evolution import (
 )
 
 from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
-from evo.envs.params import TaskParams
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig, TaskParams
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.learners.common import LearnerConfig
 from evo.robot import load_robot

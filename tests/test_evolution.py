@@ -40,7 +40,7 @@ from evo.components.ga import (
     ReplaceWorst,
     Roulette,
 )
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, evaluation_seed
 from evo.history import HistoryRow

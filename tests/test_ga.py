@@ -32,7 +32,7 @@ from evo.components.ga import (
     ReplaceWorst,
     Roulette,
 )
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.learners.common import LearnerConfig
 from evo.record.readback import read_curve

@@ -11,8 +11,7 @@ import pandas as pd
 import pytest
 import torch
 
-from evo.envs.params import TaskParams, observation_size
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig, TaskParams, observation_size
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, load_checkpoint, make_policy, save_checkpoint
 from evo.learners.ppo import train as train_ppo

@@ -17,7 +17,7 @@ from omegaconf import OmegaConf
 from evo.config import typed
 from evo.envs.arena import ArenaParams
 from evo.envs.params import TaskParams
-from evo.envs.task import build_scene
+from evo.envs.scene import build_scene
 from evo.record import (
     Episode,
     EpisodeChoice,

@@ -1,4 +1,4 @@
-"""The reach task's constants and sizes, without the simulator (SPEC section 3).
+"""The reach task's configuration and sizes, without the simulator (SPEC section 3).
 
 What a robot's observation and action look like is the task's business, not the
 body's: a robot knows its motors and pivots (``Robot.n_actuators``); the reach task
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from evo.envs.arena import ArenaParams
 from evo.robot.tree import Robot
 
 REWARD_TERMS = ("time", "approach", "success")
@@ -59,3 +60,24 @@ def observation_size(robot: Robot, task: TaskParams) -> int:
 def action_size(robot: Robot) -> int:
     """Length of the reach task's action for ``robot``: one command per actuator, m + n."""
     return robot.n_actuators
+
+
+@dataclass(frozen=True, slots=True)
+class EnvConfig:
+    """One ``conf/env/*.yaml``: which arena, the task, and how many threads step it.
+
+    Attributes:
+        name: Label of the arena (clean, cluttered).
+        nthread: Threads MuJoCo uses to step one evaluation's arenas.
+        arena: The arena.
+        task: The task.
+    """
+
+    name: str = "clean"
+    nthread: int = 1
+    arena: ArenaParams = ArenaParams()
+    task: TaskParams = TaskParams()
+
+    def __post_init__(self) -> None:
+        if self.nthread < 1:
+            raise ValueError(f"nthread must be >= 1, got {self.nthread}")

@@ -25,8 +25,8 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from evo.envs.arena import ArenaParams
-from evo.envs.params import REWARD_TERMS, TaskParams
-from evo.envs.task import EnvConfig, ReachCore
+from evo.envs.params import REWARD_TERMS, EnvConfig, TaskParams
+from evo.envs.task import ReachCore
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 

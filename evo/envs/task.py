@@ -7,7 +7,8 @@ per arena, kept between calls) steps every arena ``frame_skip`` physics steps in
 ``nthread`` threads, then observations and rewards are computed for all arenas at once
 with numpy. Every control step starts the constraint solver cold (zero warm start), as
 a stateless rollout from the saved physics state would; the arenas' data persist so
-that resting rocks can sleep (``ArenaParams.sleep``).
+that resting rocks can sleep (``ArenaParams.sleep``). The task's configuration and
+sizes are ``evo.envs.params``, the scene's MJCF ``evo.envs.scene``.
 
 Observation (``9 + 2(m + n)`` values, ``+3`` with ``observe_up``), in this order:
 
@@ -40,7 +41,6 @@ from __future__ import annotations
 
 import math
 import time
-import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -49,9 +49,10 @@ import mujoco.batch
 import numpy as np
 import numpy.typing as npt
 
-from evo.envs.arena import ArenaParams, arena_scene, sample_target, scatter_rocks
+from evo.envs.arena import ArenaParams, sample_target, scatter_rocks
 from evo.envs.params import REWARD_TERMS, TaskParams, observation_size
-from evo.robot.builder import BuiltRobot, PhysicsParams, build
+from evo.envs.scene import build_scene
+from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
 F64 = npt.NDArray[np.float64]
@@ -127,24 +128,6 @@ class _Tracer:
                 success=success,
             )
         )
-
-
-def build_scene(
-    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
-) -> BuiltRobot:
-    """The robot in its arena as MJCF (robot at the centre, rocks and target marker)."""
-    world = arena_scene(arena, task.success_radius)
-
-    def scene(root: ET.Element) -> None:
-        body = root.find("worldbody")
-        assert body is not None
-        body.extend(list(world))
-        if arena.sleep:
-            option = root.find("option")
-            assert option is not None
-            ET.SubElement(option, "flag", sleep="enable")
-
-    return build(robot, physics, scene=scene)
 
 
 class ReachCore:
@@ -448,24 +431,3 @@ class ReachCore:
         d.mocap_pos[self.target_mocap] = self.target[arena]
         mujoco.mj_kinematics(m, d)
         return d.xpos.copy(), d.xquat.copy()
-
-
-@dataclass(frozen=True, slots=True)
-class EnvConfig:
-    """One ``conf/env/*.yaml``: which arena, the task, and how many threads step it.
-
-    Attributes:
-        name: Label of the arena (clean, cluttered).
-        nthread: Threads MuJoCo uses to step one evaluation's arenas.
-        arena: The arena.
-        task: The task.
-    """
-
-    name: str = "clean"
-    nthread: int = 1
-    arena: ArenaParams = ArenaParams()
-    task: TaskParams = TaskParams()
-
-    def __post_init__(self) -> None:
-        if self.nthread < 1:
-            raise ValueError(f"nthread must be >= 1, got {self.nthread}")

@@ -19,7 +19,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
-    from evo.envs.task import EnvConfig, Trajectory
+    from evo.envs.params import EnvConfig
+    from evo.envs.task import Trajectory
     from evo.learners.common import LearnerConfig, TrainResult
     from evo.robot.builder import PhysicsParams
     from evo.robot.tree import Robot

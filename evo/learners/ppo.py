@@ -34,9 +34,8 @@ from torchrl.collectors import Collector
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from evo.envs.params import REWARD_TERMS
+from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
-from evo.envs.task import EnvConfig
 from evo.learners import CurveHook, EpisodeHook
 from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams

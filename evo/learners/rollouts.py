@@ -15,8 +15,9 @@ from dataclasses import dataclass
 
 import torch
 
+from evo.envs.params import EnvConfig
 from evo.envs.reach import make_env
-from evo.envs.task import EnvConfig, ReachCore, Trajectory
+from evo.envs.task import ReachCore, Trajectory
 from evo.learners.common import Policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot

@@ -16,8 +16,7 @@ from typing import Any
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from evo.envs.params import observation_size
-from evo.envs.task import EnvConfig
+from evo.envs.params import EnvConfig, observation_size
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, TrainResult, load_checkpoint, save_checkpoint
 from evo.learners.rollouts import evaluate_policy
