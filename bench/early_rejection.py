@@ -62,6 +62,8 @@ def replay(robots: pd.DataFrame, curves: pd.DataFrame, population_sizes: dict[st
 
 def score(offspring: pd.DataFrame, all_steps: float) -> dict[str, float]:
     """False rejections (with a Wilson CI), env steps saved, schedule ratio."""
+    if offspring.empty:
+        return dict(offspring=0)
     accepted = offspring[offspring["accepted"]]
     false = int(accepted["stopped"].sum())
     ci = (scipy.stats.binomtest(false, len(accepted)).proportion_ci(method="wilson")
@@ -102,6 +104,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     cli.add_argument("--out", type=Path, default=None, help="Markdown file for the table")
     args = cli.parse_args(argv)
     table = calibrate(args.runs, args.predictors, args.margins, args.checkpoints)
+    if not table["offspring"].any():
+        print(f"error: no offspring to replay in {' '.join(map(str, args.runs))}: a run has "
+              "offspring only after its first population_size robots", file=sys.stderr)
+        return 2
     text = markdown_table(table)
     print(text)
     if args.out is not None:

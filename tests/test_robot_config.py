@@ -32,7 +32,7 @@ ROBOT_SECTIONS: dict[str, type] = {
 }
 """The robot settings and the dataclass each becomes at the config edge."""
 OTHER_SECTIONS: dict[str, tuple[str, str]] = {
-    "env": ("evo.envs.task", "EnvConfig"),
+    "env": ("evo.envs.params", "EnvConfig"),
     "learner": ("evo.learners.common", "LearnerConfig"),
 }
 """Other top-level sections ``evo/main.py`` types, and the dataclass of each (module, name)."""
