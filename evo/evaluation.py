@@ -24,7 +24,7 @@ from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
 from evo.envs.task import Trajectory
-from evo.interrupt import critical
+from evo.interrupt import critical, raised
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, save_checkpoint
 from evo.learners.rollouts import play
@@ -160,7 +160,9 @@ def evaluate(candidate: Candidate, job: Job) -> Outcome:
     try:
         robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
         outcome = _train_and_record(robot, candidate, job, start)
-    except Exception:  # noqa: BLE001 - any failure is recorded and the run goes on
+    except Exception as err:  # noqa: BLE001 - any failure is recorded and the run goes on
+        if (stop := raised()) is not None:  # a signal, turned into another error on its way
+            raise stop from err
         return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
                        error=traceback.format_exc(limit=8))
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)

@@ -52,6 +52,24 @@ class Interrupted(BaseException):  # noqa: N818 - like KeyboardInterrupt, not an
 _held: list[int] = []  # signals that arrived inside a critical block
 _depth = 0  # nesting of critical blocks
 _stopping = False  # a signal was raised: ignore the next ones
+_raised: int | None = None  # the signal last raised as Interrupted in this process
+
+
+def _interrupt(signum: int) -> Interrupted:
+    global _raised
+    _raised = signum
+    return Interrupted(signum)
+
+
+def raised() -> Interrupted | None:
+    """A fresh :class:`Interrupted` when a signal has already been raised as one in this
+    process, else None.
+
+    Library code that cleans up while ``Interrupted`` unwinds it may fail and raise an
+    ordinary exception in its place; code that records ordinary exceptions as results
+    (a failed evaluation) asks this first and raises the interrupt instead.
+    """
+    return None if _raised is None else Interrupted(_raised)
 
 
 def _on_signal(signum: int, frame: FrameType | None) -> None:
@@ -62,15 +80,15 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
         _held.append(signum)
         return
     _stopping = True
-    raise Interrupted(signum)
+    raise _interrupt(signum)
 
 
 @contextmanager
 def handle_signals() -> Iterator[None]:
     """Raise :class:`Interrupted` on SIGINT and SIGTERM inside the block (main thread)."""
-    global _stopping
+    global _stopping, _raised
     before = {s: signal.signal(s, _on_signal) for s in EXIT_CODES}
-    _stopping = False
+    _stopping, _raised = False, None
     try:
         yield
     finally:
@@ -92,7 +110,7 @@ def critical() -> Iterator[None]:
         signum = _held[0]
         _held.clear()
         _stopping = True
-        raise Interrupted(signum)
+        raise _interrupt(signum)
 
 
 # ---------------------------------------------------------------- workers
@@ -105,7 +123,7 @@ def _worker_signal(signum: int, frame: FrameType | None) -> None:
         _held.append(signum)
         return
     if _busy:
-        raise Interrupted(signum)
+        raise _interrupt(signum)
     os._exit(EXIT_CODES.get(signal.Signals(signum), 128 + signum))
 
 

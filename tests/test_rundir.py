@@ -167,6 +167,35 @@ def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
     assert status == ("complete" if moment.startswith("closing") else "failed")
 
 
+def test_a_signal_that_cleanup_turns_into_another_error_is_not_a_failed_robot(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A real SIGINT during training, which library code unwinding from it replaces with an
+    ordinary error (as tensordict's ``__bool__`` can in a ``finally``), still stops the
+    evaluation as an interrupt: the robot is pending for the resume, not recorded failed."""
+    from test_early_rejection import NEAR, TINY_LEARNER, real_candidate
+
+    from evo.evaluation import Job, evaluate
+    from evo.interrupt import Interrupted, handle_signals
+    from evo.robot.builder import PhysicsParams
+
+    original = mcap_file.McapRecorder.curve
+
+    def converting(*args: object, **kwargs: object) -> object:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            return original(*args, **kwargs)  # type: ignore[arg-type]
+        finally:
+            raise RuntimeError("Converting a tensordict to boolean value is not permitted")
+
+    monkeypatch.setattr(mcap_file.McapRecorder, "curve", converting)
+    with handle_signals(), pytest.raises(Interrupted) as stop:
+        evaluate(real_candidate(float("-inf")),
+                 Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
+    assert stop.value.signum == signal.SIGINT
+    assert isinstance(stop.value.__cause__, RuntimeError)
+
+
 def children_of(pid: int) -> list[int]:
     """PIDs of the live child processes of ``pid`` (from /proc)."""
     kids = []
