@@ -287,7 +287,7 @@ def read_robot_curve(run_dir: Path, name: str) -> tuple[pd.DataFrame | None, str
         if mcap.is_file():
             return read_curve(mcap), "mcap"
         if csv.is_file():
-            return pd.read_csv(csv), "csv"
+            return read_curve(csv), "csv"
     except Exception as err:  # noqa: BLE001 - reader errors name no run; add it
         bad = mcap if mcap.is_file() else csv
         raise RunDirectoryError(f"{bad}: cannot read the learning curve ({err})") from None

@@ -60,6 +60,7 @@ from analysis.bootstrap import bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
+from evo.record import read_curve
 
 ESTIMATORS: dict[str, str] = {
     "fitness": "Eq. 8: mean return of every episode completed in training",
@@ -201,17 +202,18 @@ def late_fitness(curve: pd.DataFrame, budget: float) -> float:
     """Mean return of the episodes completed after half the budget (``fitness_late``).
 
     Args:
-        curve: A learning curve (``env_steps``, ``episodes``, ``mean_return`` per batch).
+        curve: A learning curve (``env_steps``, ``train/episodes``, ``train/mean_return`` per
+            batch).
         budget: The training's budget, env steps.
 
     Returns:
         The episode-weighted mean; NaN when no episode ended in the second half.
     """
-    late = curve[(curve["env_steps"] > budget / 2) & (curve["episodes"] > 0)
-                 & np.isfinite(curve["mean_return"])]
-    if late["episodes"].sum() <= 0:
+    late = curve[(curve["env_steps"] > budget / 2) & (curve["train/episodes"] > 0)
+                 & np.isfinite(curve["train/mean_return"])]
+    if late["train/episodes"].sum() <= 0:
         return float("nan")
-    return float(np.average(late["mean_return"], weights=late["episodes"]))
+    return float(np.average(late["train/mean_return"], weights=late["train/episodes"]))
 
 
 def ceiling_table(trainings: pd.DataFrame, rng: np.random.Generator, *,
@@ -410,7 +412,7 @@ def _jobs(out: Path, parts: Any, settings: Settings) -> dict[str, Any]:
 def _training_row(out: Path, training: Training, learner: str, settings: Settings,
                   outcome: Any) -> dict[str, Any]:
     """The ``trainings.csv`` row of one finished training."""
-    curve = pd.read_csv(out / "evals" / f"{training.name}.csv")
+    curve = read_curve(out / "evals" / f"{training.name}.csv")
     return dict(
         name=training.name, structure=training.structure, role=training.role, learner=learner,
         replicate=training.replicate, seed=training.seed, budget=settings.budget,

@@ -157,9 +157,9 @@ def plot_learning_curves(
     rows = curves if run is None else curves[curves["run"] == run]
     fig, (ax,) = new_figure()
     for name, label in zip(names, labels or names, strict=True):
-        curve = rows[rows["name"] == name].dropna(subset=["mean_return"])
+        curve = rows[rows["name"] == name].dropna(subset=["train/mean_return"])
         curve = curve.sort_values("env_steps")
-        smooth = curve["mean_return"].rolling(window, min_periods=1).mean()
+        smooth = curve["train/mean_return"].rolling(window, min_periods=1).mean()
         ax.plot(curve["env_steps"], smooth, label=label)
     ax.set(xlabel="env steps", ylabel="mean return")
     ax.legend(fontsize="small")

@@ -140,9 +140,8 @@ def synthetic_curves(
         run=np.repeat(robots["run"].to_numpy(), n_batches),
         name=np.repeat(robots["name"].to_numpy(), n_batches),
         env_steps=steps.ravel().astype(int),
-        mean_return=y.ravel(),
-        episodes=episodes,
-        success_rate=np.nan,
+        **{"train/mean_return": y.ravel(), "train/episodes": episodes,
+           "train/success_rate": np.nan},
     ))
 
 

@@ -24,17 +24,20 @@ column        dtype    meaning
 
 **Curves table**: one row per collector batch of one robot's training.
 
-================  =====  ==========================================================
-column            dtype  meaning
-================  =====  ==========================================================
-``run``           str    run directory id
-``name``          str    robot name, as in the robots table
-``env_steps``     int    env steps so far in this robot's training (cumulative)
-``mean_return``   float  mean return of the episodes completed in the batch; NaN if
-                         none completed
-``episodes``      int    number of episodes completed in the batch
-``success_rate``  float  share of those episodes that reached the target
-================  =====  ==========================================================
+======================  =====  ====================================================
+column                  dtype  meaning
+======================  =====  ====================================================
+``run``                 str    run directory id
+``name``                str    robot name, as in the robots table
+``env_steps``           int    env steps so far in this robot's training (cumulative)
+``train/mean_return``   float  mean return of the episodes completed in the batch;
+                               NaN if none completed
+``train/episodes``      int    number of episodes completed in the batch
+``train/success_rate``  float  share of those episodes that reached the target
+======================  =====  ====================================================
+
+Curves recorded before metric keys were namespaced (``mean_return``, ...) load under
+these names (:func:`evo.record.read_curve`).
 
 ``(run, name)`` identifies a robot in both tables.
 """
@@ -53,7 +56,7 @@ ROBOT_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "birth", "name", "budget", "fitness", "accepted", "parents",
 )
 CURVE_COLUMNS: tuple[str, ...] = (
-    "run", "name", "env_steps", "mean_return", "episodes", "success_rate",
+    "run", "name", "env_steps", "train/mean_return", "train/episodes", "train/success_rate",
 )
 
 

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-import pandas as pd
 import torch
 from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
 from rich.console import Console
@@ -39,6 +38,7 @@ from evo.edge import TrainingParts, compose_config, training_parts
 from evo.envs.reach import make_env
 from evo.learners.ppo import train
 from evo.learners.rollouts import evaluate_policy
+from evo.record import read_curve
 from evo.robot import load_robot
 
 
@@ -109,9 +109,9 @@ def plot_curves(folder: Path) -> Path:
     """``folder/curves.png``: success rate and mean return against env steps, every run."""
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8))
     for path in sorted(folder.glob("*.csv")):
-        curve = pd.read_csv(path)
+        curve = read_curve(path)
         style = "-" if path.stem.endswith("-clean") else "--"
-        for ax, column in ((left, "success_rate"), (right, "mean_return")):
+        for ax, column in ((left, "train/success_rate"), (right, "train/mean_return")):
             ax.plot(curve["env_steps"], curve[column].interpolate(), style, label=path.stem)
     left.set(xlabel="env steps", ylabel="success rate (finished episodes)")
     right.set(xlabel="env steps", ylabel="mean return (finished episodes)")

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
-import pandas as pd
 
 from analysis import plots
 from analysis.load import load_runs
 from evo.envs.gym_env import ReachGymEnv
+from evo.record import read_curve
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
 from evo.robot.gallery import contact_sheet
@@ -44,11 +44,11 @@ def main() -> None:
     env.close()
     print(HERE / "arena.png")
     if args.curve is not None:
-        curve = pd.read_csv(args.curve / "curve.csv")
+        curve = read_curve(args.curve / "curve.csv")
         fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.2))
-        left.plot(curve["env_steps"], curve["mean_return"].interpolate(), color="tab:blue")
+        left.plot(curve["env_steps"], curve["train/mean_return"].interpolate(), color="tab:blue")
         left.set(xlabel="env steps", ylabel="mean return of finished episodes")
-        right.plot(curve["env_steps"], curve["success_rate"].interpolate(), color="tab:green")
+        right.plot(curve["env_steps"], curve["train/success_rate"].interpolate(), color="tab:green")
         right.set(xlabel="env steps", ylabel="success rate", ylim=(-0.02, 1.02))
         fig.suptitle("PPO on the four-wheeler, clean arena")
         fig.tight_layout()

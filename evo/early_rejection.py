@@ -55,11 +55,11 @@ class Curve:
     @classmethod
     def from_rows(cls, rows: pd.DataFrame) -> Curve:
         """Build from one robot's rows of a curves table, dropping uninformative batches."""
-        done = rows[(rows["episodes"] > 0) & np.isfinite(rows["mean_return"])]
+        done = rows[(rows["train/episodes"] > 0) & np.isfinite(rows["train/mean_return"])]
         done = done.sort_values("env_steps")
         return cls(done["env_steps"].to_numpy(dtype=float),
-                   done["mean_return"].to_numpy(dtype=float),
-                   done["episodes"].to_numpy(dtype=float))
+                   done["train/mean_return"].to_numpy(dtype=float),
+                   done["train/episodes"].to_numpy(dtype=float))
 
     def select(self, mask: NDArray[np.bool_]) -> Curve:
         """The batches where ``mask`` holds."""

@@ -23,7 +23,6 @@ from evo.components.executors import EvalExecutor
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
-from evo.envs.task import Trajectory
 from evo.interrupt import critical, raised
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, save_checkpoint
@@ -116,23 +115,22 @@ def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExec
 class EpisodeSampler:
     """Passes the episodes the record config asks for to the recorder.
 
-    Every episode of the traced arena comes through here; the chosen ones are recorded
-    at once, and the latest other one is held back in case it turns out to be the last
-    (``finish``). Episodes cut short by a numerical blow-up (MuJoCo resets the arena,
-    time jumps back) are counted but never recorded.
+    Every episode of the traced arena comes through here, numbered by the tracer; the
+    chosen ones are recorded at once, and the latest other one is held back in case it
+    turns out to be the last (``finish``). Episodes cut short by a numerical blow-up
+    (``Episode.unstable``) are counted but never recorded.
     """
 
     def __init__(self, recorder: Recorder, config: RecordConfig) -> None:
         self.recorder, self.config = recorder, config
-        self.count = 0
+        self.count = 0  # episodes seen
         self.held: Episode | None = None
 
-    def __call__(self, trajectory: Trajectory, env_step: int) -> None:
-        index, self.count = self.count, self.count + 1
-        if len(trajectory.time) > 1 and not (trajectory.time[1:] > trajectory.time[:-1]).all():
+    def __call__(self, episode: Episode) -> None:
+        self.count = episode.index + 1
+        if episode.unstable:
             return
-        episode = to_episode(trajectory, index, env_step)
-        if should_record(self.config, index, is_last=False):
+        if should_record(self.config, episode.index, is_last=False):
             self.recorder.episode(episode)
             self.held = None
         else:
@@ -143,13 +141,6 @@ class EpisodeSampler:
         if self.held is not None and should_record(self.config, self.held.index, is_last=True):
             self.recorder.episode(self.held)
         self.held = None
-
-
-def to_episode(trajectory: Trajectory, index: int, env_step: int) -> Episode:
-    """The recorder's view of one traced episode."""
-    return Episode(index=index, env_step=env_step, time=trajectory.time, xpos=trajectory.xpos,
-                   xquat=trajectory.xquat, target=trajectory.target,
-                   rewards=trajectory.rewards, success=trajectory.success)
 
 
 def evaluate(candidate: Candidate, job: Job) -> Outcome:
@@ -205,7 +196,8 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float
         if job.record.enabled:  # one deterministic episode, as `evo.replay` re-plays it
             _, (final,) = play(robot, result.policy, physics=job.physics, env=job.env,
                                seed=candidate.seed)
-            recorder.episode(to_episode(final, sampler.count, result.env_steps))
+            recorder.episode(dataclasses.replace(final, index=sampler.count,
+                                                 env_step=result.env_steps))
         result.curve.to_csv(evals / f"{candidate.name}.csv", index=False)
         save_checkpoint(result.policy, evals / f"{candidate.name}.pt", job.learner,
                         robot=robot.hash)

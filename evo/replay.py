@@ -28,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 from evo.config import ConfigError
 from evo.edge import env_of, physics_of
 from evo.envs.params import EnvConfig, observation_size
-from evo.envs.task import Trajectory
+from evo.episode import Episode
 from evo.learners.common import load_checkpoint
 from evo.learners.rollouts import play
 from evo.robot.builder import PhysicsParams
@@ -70,7 +70,7 @@ def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
 
 def write_video(
     model: mujoco.MjModel,
-    episodes: Sequence[Trajectory],
+    episodes: Sequence[Episode],
     path: Path,
     width: int = 640,
     height: int = 480,
@@ -93,6 +93,9 @@ def write_video(
     try:
         with imageio.get_writer(path, fps=fps) as writer:
             for episode in episodes:
+                if episode.qpos is None:
+                    raise ValueError(f"{path}: episode {episode.index} has no joint positions "
+                                     "to render (a played episode has them)")
                 lookat, distance = tracking_shot(episode.xpos[:, brain], episode.target)
                 for t, qpos in enumerate(episode.qpos):
                     data.qpos[:] = qpos
@@ -150,7 +153,7 @@ def replay(
     seed: int | None,
     video: Path | None,
     rrd: Path | None,
-) -> list[Trajectory]:
+) -> list[Episode]:
     """Re-simulate ``episodes`` deterministic episodes and write the requested files.
 
     With ``seed=None`` the first episode is the one recorded after training.

@@ -36,9 +36,9 @@ def curve_of(steps: np.ndarray, returns: np.ndarray, episodes: int = 2) -> es.Cu
 
 
 def test_episode_mean_weights_batches_and_skips_empty_ones() -> None:
-    rows = pd.DataFrame(dict(run="r", name="robot-a", env_steps=[10, 20, 30],
-                             mean_return=[1.0, np.nan, 4.0], episodes=[3, 0, 1],
-                             success_rate=np.nan))
+    rows = pd.DataFrame({"run": "r", "name": "robot-a", "env_steps": [10, 20, 30],
+                         "train/mean_return": [1.0, np.nan, 4.0], "train/episodes": [3, 0, 1],
+                         "train/success_rate": np.nan})
     curve = es.Curve.from_rows(rows)
     assert curve.steps.tolist() == [10.0, 30.0]
     assert curve.episode_mean() == pytest.approx((3 * 1.0 + 1 * 4.0) / 4)

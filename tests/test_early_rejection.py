@@ -37,7 +37,7 @@ RULE = EarlyRejection(enabled=True, checkpoints=(0.2, 0.35, 0.5), margin=0.1)
 def rows(returns: list[float], budget: int = 10_000, episodes: int = 4) -> list[dict[str, float]]:
     """A learning curve of len(returns) batches spread evenly over ``budget``."""
     steps = np.linspace(budget / len(returns), budget, len(returns))
-    return [dict(env_steps=float(s), episodes=float(episodes), mean_return=r)
+    return [{"env_steps": float(s), "train/episodes": float(episodes), "train/mean_return": r}
             for s, r in zip(steps, returns, strict=True)]
 
 

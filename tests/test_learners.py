@@ -65,17 +65,18 @@ def test_ppo_clearly_beats_the_random_learner(ppo_run, random_run) -> None:  # n
     )
     assert ppo_eval.success_rate >= 0.6, ppo_eval
     assert ppo_eval.success_rate >= random_eval.success_rate + 0.4, (ppo_eval, random_eval)
-    late = ppo_run.curve["success_rate"].iloc[-4:].mean()
-    early = ppo_run.curve["success_rate"].iloc[:4].mean()
+    late = ppo_run.curve["train/success_rate"].iloc[-4:].mean()
+    early = ppo_run.curve["train/success_rate"].iloc[:4].mean()
     assert late > early, f"success rate did not rise during training: {early} -> {late}"
 
 
 def test_fitness_is_the_mean_of_completed_episode_returns(ppo_run, random_run) -> None:  # noqa: ANN001
     for run in (ppo_run, random_run):
-        curve = run.curve.dropna(subset=["mean_return"])
-        expected = (curve["mean_return"] * curve["episodes"]).sum() / curve["episodes"].sum()
+        curve = run.curve.dropna(subset=["train/mean_return"])
+        expected = ((curve["train/mean_return"] * curve["train/episodes"]).sum()
+                    / curve["train/episodes"].sum())
         assert run.fitness == pytest.approx(expected, rel=1e-5)
-        assert run.episodes == int(run.curve["episodes"].sum())
+        assert run.episodes == int(run.curve["train/episodes"].sum())
 
 
 def test_budget_is_respected_within_one_batch(ppo_run) -> None:  # noqa: ANN001
@@ -129,7 +130,7 @@ def test_random_learner_never_changes_its_weights(ppo_run, random_run) -> None: 
     # The same comparison does see PPO's training.
     trained = ppo_run.policy.state_dict()["actor"]
     assert any(not torch.equal(trained[k], v) for k, v in start["actor"].items())
-    assert np.isnan(random_run.curve["loss/objective"]).all()
+    assert np.isnan(random_run.curve["train/loss/objective"]).all()
 
 
 def test_mean_action_is_the_deterministic_action(ppo_run) -> None:  # noqa: ANN001

@@ -63,8 +63,8 @@ def test_top_quarter_and_baseline_shares_on_a_small_case() -> None:
 
 
 def test_late_fitness_weights_the_episodes_of_the_second_half() -> None:
-    curve = pd.DataFrame(dict(env_steps=[100, 200, 300, 400], episodes=[5, 0, 1, 3],
-                              mean_return=[-1.0, np.nan, 0.5, 1.0]))
+    curve = pd.DataFrame({"env_steps": [100, 200, 300, 400], "train/episodes": [5, 0, 1, 3],
+                          "train/mean_return": [-1.0, np.nan, 0.5, 1.0]})
     assert nc.late_fitness(curve, budget=400) == pytest.approx((0.5 + 3 * 1.0) / 4)
     assert np.isnan(nc.late_fitness(curve.iloc[:2], budget=400))
 

@@ -93,14 +93,14 @@ def curve_rows(n: int) -> list[dict[str, float]]:
         rows.append(
             {
                 "env_steps": float(2048 * (i + 1)),
-                "episodes": float(i % 3),
-                "mean_return": math.nan if i % 3 == 0 else 0.1 * i + 1e-17,
-                "success_rate": 1 / 3,
-                "reward/time": -0.001,
-                "reward/approach": -0.0 if i == 1 else 1e-300 * i,
-                "loss/objective": math.inf if i == 2 else -math.inf if i == 3 else 0.25,
-                "loss/critic": 12345678.901234567,
-                "lr": 3e-4,
+                "train/episodes": float(i % 3),
+                "train/mean_return": math.nan if i % 3 == 0 else 0.1 * i + 1e-17,
+                "train/success_rate": 1 / 3,
+                "train/reward/time": -0.001,
+                "train/reward/approach": -0.0 if i == 1 else 1e-300 * i,
+                "train/loss/objective": math.inf if i == 2 else -math.inf if i == 3 else 0.25,
+                "train/loss/critic": 12345678.901234567,
+                "train/lr": 3e-4,
                 "wall_seconds": float(i),
             }
         )
@@ -265,7 +265,7 @@ def test_stride_keeps_the_return_and_the_last_frame() -> None:
 
 def test_curve_reads_back_exactly(tmp_path: Path) -> None:
     rows = curve_rows(13)
-    rows[7]["new/late_key"] = 7.0  # a column that appears late
+    rows[7]["eval/late_key"] = 7.0  # a column that appears late
     path = tmp_path / "evals" / "robot-00000001.mcap"
     with McapRecorder(path, scene(), {"seed": 3}, flush_every=4) as rec:
         for row in rows:
@@ -273,7 +273,23 @@ def test_curve_reads_back_exactly(tmp_path: Path) -> None:
     curve = read_curve(path)
     pd.testing.assert_frame_equal(curve, pd.DataFrame(rows), check_exact=True)
     assert list(curve.columns) == list(pd.DataFrame(rows).columns)
-    assert math.copysign(1.0, curve["reward/approach"][1]) == -1.0, "-0.0 keeps its sign"
+    assert math.copysign(1.0, curve["train/reward/approach"][1]) == -1.0, "-0.0 keeps its sign"
+
+
+def test_curves_recorded_before_metric_keys_were_namespaced_load_under_the_new_names(
+    tmp_path: Path,
+) -> None:
+    """A recording (MCAP or CSV) with the old unprefixed keys reads back as one made now."""
+    rows = curve_rows(4)
+    old = [{k.removeprefix("train/"): v for k, v in row.items()} for row in rows]
+    assert "mean_return" in old[0] and "loss/critic" in old[0]
+    with McapRecorder(tmp_path / "old.mcap", scene(), {"seed": 3}) as rec:
+        for row in old:
+            rec.curve(row)
+    pd.DataFrame(old).to_csv(tmp_path / "old.csv", index=False)
+    for path in (tmp_path / "old.mcap", tmp_path / "old.csv"):
+        pd.testing.assert_frame_equal(read_curve(path), pd.DataFrame(rows), check_exact=True,
+                                      check_dtype=path.suffix == ".mcap")
 
 
 def robot_bodies(model: mujoco.MjModel) -> np.ndarray:
@@ -388,7 +404,7 @@ def test_wrong_files_and_episodes_raise_clear_errors(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="w.mcap.*bodies"):
             rec.episode(simulate(scene(n_rocks=0), frames=3))
         with pytest.raises(KeyError, match="env_steps"):
-            rec.curve({"mean_return": 1.0})
+            rec.curve({"train/mean_return": 1.0})
 
 
 def test_open_recorder_follows_the_config(tmp_path: Path) -> None:

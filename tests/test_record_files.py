@@ -155,10 +155,10 @@ def test_rrd_holds_the_scene_curves_and_a_blueprint(tmp_path: Path) -> None:
         "/episode/reward/approach",
         "/episode/return",
         "/episode/log",
-        "/curve/mean_return",
-        "/curve/success_rate",
-        "/curve/loss/objective",
-        "/curve/reward/approach",
+        "/curve/train/mean_return",
+        "/curve/train/success_rate",
+        "/curve/train/loss/objective",
+        "/curve/train/reward/approach",
         "/metadata/robot",
         "/metadata/seed",
         "/summary/fitness",
@@ -173,7 +173,7 @@ def test_exception_inside_with_still_closes_the_rrd(tmp_path: Path) -> None:
     mcap, rrd = tmp_path / "f.mcap", tmp_path / "f.rrd"
     recorders = Recorders([McapRecorder(mcap, model, {}), RerunRecorder(rrd, model, {})])
     with pytest.raises(ZeroDivisionError), recorders as rec:
-        rec.curve({"env_steps": 64.0, "mean_return": 0.5})
+        rec.curve({"env_steps": 64.0, "train/mean_return": 0.5})
         rec.episode(simulate(model, frames=20))
         _ = 1 / 0
     verify = cli("rrd", "verify", rrd)
@@ -284,7 +284,7 @@ def test_many_evaluations_leave_no_threads_behind(tmp_path: Path) -> None:
 
     def evaluate(i: int) -> None:
         with open_recorder(config, tmp_path, f"robot-{i}", model, {}) as rec:
-            rec.curve({"env_steps": 1.0, "mean_return": 0.0})
+            rec.curve({"env_steps": 1.0, "train/mean_return": 0.0})
 
     evaluate(0)  # rerun starts its shared runtime on first use
     before = native_threads()

@@ -7,7 +7,7 @@ misses. These pure functions test that on a robots table and a curves table (sch
 
 **Prefix.** A robot's curve cut at ``fraction × budget`` env steps: its collector
 batches with ``env_steps`` at or below the cut. Batches that completed no episode
-(``mean_return`` NaN) carry no information and are skipped.
+(``train/mean_return`` NaN) carry no information and are skipped.
 
 **Predictors** (one number per robot and cut):
 
@@ -88,9 +88,10 @@ def curve_fitness(curves: pd.DataFrame) -> pd.Series:
         Episode-weighted mean return per robot, indexed by ``(run, name)``.
     """
     require_columns(curves, CURVE_COLUMNS, "curves table")
-    done = curves[(curves["episodes"] > 0) & np.isfinite(curves["mean_return"])]
-    totals = (done["mean_return"] * done["episodes"]).groupby([done["run"], done["name"]])
-    return (totals.sum() / done.groupby(["run", "name"])["episodes"].sum()).rename("fitness")
+    done = curves[(curves["train/episodes"] > 0) & np.isfinite(curves["train/mean_return"])]
+    totals = ((done["train/mean_return"] * done["train/episodes"])
+              .groupby([done["run"], done["name"]]))
+    return (totals.sum() / done.groupby(["run", "name"])["train/episodes"].sum()).rename("fitness")
 
 
 def robot_predictors(curve: Curve, budget: float, fraction: float, *,

@@ -176,6 +176,17 @@ class RandomStructures:
         return self.initial(rng)
 
 
+def check_mutation(rate: float, operators: Sequence[str]) -> None:
+    """Raise a readable error unless ``rate`` is a probability and every operator is known."""
+    if not 0 <= rate <= 1:
+        raise ValueError(f"mutation_rate must be in [0, 1], got {rate}")
+    unknown = set(operators) - set(MUTATIONS)
+    if unknown:
+        raise ValueError(
+            f"unknown mutation operators {sorted(unknown)}; expected some of {sorted(MUTATIONS)}"
+        )
+
+
 @dataclass(frozen=True, slots=True)
 class Evolve:
     """Structure strategy ``E``: crossover of two selected parents (paper section 6).
@@ -200,14 +211,7 @@ class Evolve:
     code: str = "E"
 
     def __post_init__(self) -> None:
-        if not 0 <= self.mutation_rate <= 1:
-            raise ValueError(f"mutation_rate must be in [0, 1], got {self.mutation_rate}")
-        unknown = set(self.mutation_operators) - set(MUTATIONS)
-        if unknown:
-            raise ValueError(
-                f"unknown mutation operators {sorted(unknown)}; "
-                f"expected some of {sorted(MUTATIONS)}"
-            )
+        check_mutation(self.mutation_rate, self.mutation_operators)
 
     def initial(self, rng: np.random.Generator) -> Offspring:
         return Offspring(random_robot(rng, self.generator, self.limits))
@@ -285,7 +289,7 @@ class GAConfig:
         if self.structure not in STRUCTURES:
             raise ValueError(f"structure: expected E (evolve) or R (random), got "
                              f"{self.structure!r}")
-        self.strategy()  # the strategy's own checks (mutation_rate, ...) at start
+        check_mutation(self.mutation_rate, self.mutation_operators)
 
     def strategy(self, generator: GeneratorParams | None = None,
                  limits: Limits | None = None) -> StructureStrategy:

@@ -52,6 +52,7 @@ import numpy.typing as npt
 from evo.envs.arena import ArenaParams, sample_target, scatter_rocks
 from evo.envs.params import REWARD_TERMS, TaskParams, observation_size
 from evo.envs.scene import build_scene
+from evo.episode import Episode
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -72,60 +73,37 @@ class Step:
     episode_length: npt.NDArray[np.int64]
 
 
-@dataclass(frozen=True)
-class Trajectory:
-    """One finished episode of the watched arena; one row per frame (0 = the start).
-
-    Attributes:
-        time: Sim time of every frame, s.
-        xpos: World position of every body of the scene, (T, nbody, 3).
-        xquat: World orientation of every body, (T, nbody, 4), w x y z.
-        qpos: Joint positions, (T, nq): with the target, enough to redraw every frame.
-        target: The target, (3,).
-        rewards: Each reward term per frame (0 at frame 0).
-        success: Whether the robot reached the target.
-    """
-
-    time: F64
-    xpos: F64
-    xquat: F64
-    qpos: F64
-    target: F64
-    rewards: dict[str, F64]
-    success: bool
-
-    @property
-    def total_return(self) -> float:
-        """Sum of every reward term over the episode."""
-        return float(sum(v.sum() for v in self.rewards.values()))
-
-
 class _Tracer:
-    """Frames of the watched arena's running episode."""
+    """Frames of the watched arena's running episode; ``count`` episodes ended so far."""
 
-    def __init__(self, core: ReachCore, callback: Callable[[Trajectory], None]) -> None:
+    def __init__(self, core: ReachCore, callback: Callable[[Episode], None]) -> None:
         self.core, self.callback = core, callback
         self.frames: list[tuple[float, F64, F64, F64, dict[str, float]]] = []
+        self.count = 0
 
     def frame(self, terms: dict[str, float]) -> None:
         xpos, xquat = self.core.poses(0)
         self.frames.append((float(self.core.time[0]), xpos, xquat, self.core.qpos[0].copy(),
                             terms))
 
-    def finish(self, success: bool) -> None:
+    def finish(self, success: bool, unstable: bool) -> None:
         if not self.frames:
             return
         time, xpos, xquat, qpos, terms = zip(*self.frames, strict=True)
         self.frames = []
+        index, self.count = self.count, self.count + 1
         self.callback(
-            Trajectory(
+            Episode(
+                index=index,
+                env_step=int(self.core.steps_taken),
                 time=np.array(time),
                 xpos=np.stack(xpos),
                 xquat=np.stack(xquat),
-                qpos=np.stack(qpos),
                 target=self.core.target[0].copy(),
                 rewards={k: np.array([t[k] for t in terms]) for k in REWARD_TERMS},
                 success=success,
+                qpos=np.stack(qpos),
+                unstable=unstable,
             )
         )
 
@@ -237,9 +215,10 @@ class ReachCore:
         state: F64 = self.batch.state
         return state
 
-    def watch(self, callback: Callable[[Trajectory], None] | None) -> None:
+    def watch(self, callback: Callable[[Episode], None] | None) -> None:
         """Trace every episode of arena 0 from its next reset; ``callback`` receives each
-        one when it ends (None stops tracing). Costs one forward kinematics per step."""
+        one when it ends, numbered from 0 (None stops tracing). Costs one forward
+        kinematics per step."""
         self._tracer = None if callback is None else _Tracer(self, callback)
 
     def seed(self, seed: int | None) -> None:
@@ -328,7 +307,7 @@ class ReachCore:
         if self._tracer is not None and self._tracer.frames:
             self._tracer.frame({name: float(terms[name][0]) for name in REWARD_TERMS})
             if success[0] or truncated[0]:
-                self._tracer.finish(bool(success[0]))
+                self._tracer.finish(bool(success[0]), bool(unstable[0]))
         return Step(
             observation=self.observation.copy(),
             reward=reward,

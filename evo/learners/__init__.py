@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     from evo.envs.params import EnvConfig
-    from evo.envs.task import Trajectory
+    from evo.episode import Episode
     from evo.learners.common import LearnerConfig, TrainResult
     from evo.robot.builder import PhysicsParams
     from evo.robot.tree import Robot
@@ -29,8 +29,9 @@ CurveHook = Callable[[dict[str, float]], bool | None]
 """Called with every learning-curve row as soon as it exists (recorders, progress, early
 rejection); returning True asks training to stop after this batch."""
 
-EpisodeHook = Callable[["Trajectory", int], None]
-"""Called with every finished episode of arena 0 and the env-step count at its end."""
+EpisodeHook = Callable[["Episode"], None]
+"""Called with every finished episode of arena 0 (numbered, with the env-step count at
+its end)."""
 
 
 class Learner(Protocol):

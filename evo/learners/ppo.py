@@ -42,13 +42,14 @@ from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
 _LOSS_KEYS = {
-    "loss/objective": "loss_objective",
-    "loss/critic": "loss_critic",
-    "loss/entropy": "loss_entropy",
-    "entropy": "entropy",
-    "kl": "kl_approx",
-    "clip_fraction": "clip_fraction",
+    "train/loss/objective": "loss_objective",
+    "train/loss/critic": "loss_critic",
+    "train/loss/entropy": "loss_entropy",
+    "train/entropy": "entropy",
+    "train/kl": "kl_approx",
+    "train/clip_fraction": "clip_fraction",
 }
+"""Curve keys of the update's statistics and the ClipPPOLoss outputs they average."""
 
 
 def _completed(batch: TensorDictBase) -> dict[str, torch.Tensor]:
@@ -66,10 +67,10 @@ def _episode_stats(episodes: dict[str, torch.Tensor]) -> dict[str, float]:
     n = int(episodes["return"].numel())
     nan = float("nan")
     return {
-        "episodes": float(n),
-        "mean_return": float(episodes["return"].mean()) if n else nan,
-        "success_rate": float(episodes["success"].mean()) if n else nan,
-        "episode_length": float(episodes["length"].mean()) if n else nan,
+        "train/episodes": float(n),
+        "train/mean_return": float(episodes["return"].mean()) if n else nan,
+        "train/success_rate": float(episodes["success"].mean()) if n else nan,
+        "train/episode_length": float(episodes["length"].mean()) if n else nan,
     }
 
 
@@ -148,7 +149,7 @@ def _batch_row(batch: TensorDictBase, steps: int,
     """The curve row's env-step count, episode statistics and reward terms of a batch."""
     row = {"env_steps": float(steps), **_episode_stats(episodes)}
     for term in REWARD_TERMS:
-        row[f"reward/{term}"] = float(batch["next", "reward_terms", term].mean())
+        row[f"train/reward/{term}"] = float(batch["next", "reward_terms", term].mean())
     return row
 
 
@@ -165,8 +166,7 @@ def _train(
     start = time.perf_counter()
     env = make_env(robot, physics, env_config, config.num_envs, seed)
     if on_episode is not None:
-        core = env.core
-        core.watch(lambda episode: on_episode(episode, int(core.steps_taken)))
+        env.core.watch(on_episode)
     policy = make_policy(env.observation_spec["observation"].shape[-1],
                          env.action_spec.shape[-1], config)  # sizes from the env specs
     loss, gae, optimizer = _objective(policy, config)
@@ -234,7 +234,7 @@ def _learn(
     """One PPO update on ``batch``, then the observation statistics; NaN losses when the
     learner does not update."""
     if not config.update:
-        return {**dict.fromkeys(_LOSS_KEYS, float("nan")), "lr": 0.0}
+        return {**dict.fromkeys(_LOSS_KEYS, float("nan")), "train/lr": 0.0}
     lr = config.lr * (max(0.0, 1 - (steps - batch.numel()) / budget) if config.anneal_lr else 1)
     for group in optimizer.param_groups:
         group["lr"] = lr
@@ -243,4 +243,4 @@ def _learn(
     losses = _update(batch, loss, optimizer, config)
     # Statistics change only after the update, so the update's ratios start at 1.
     policy.norm.update(batch["observation"])
-    return {**losses, "lr": lr}
+    return {**losses, "train/lr": lr}

@@ -3,8 +3,8 @@
 Both run the policy's mean action (``Policy.mean_action``, no exploration noise).
 ``evaluate_policy`` runs one episode per arena in parallel and returns the success rate
 and returns (``+exp=train``'s evaluation, ``+exp=evaluate``). ``play`` runs episodes
-one after another in one arena and keeps every frame (``evo.envs.task.Trajectory``:
-poses of every body, joint positions, reward terms, outcome), for recording and
+one after another in one arena and keeps every frame (``evo.episode.Episode``: poses
+of every body, joint positions, reward terms, outcome), for recording and
 replay. The same ``seed`` gives the same episodes, so an episode recorded after
 training can be replayed later from the checkpoint alone.
 """
@@ -17,7 +17,8 @@ import torch
 
 from evo.envs.params import EnvConfig
 from evo.envs.reach import make_env
-from evo.envs.task import ReachCore, Trajectory
+from evo.envs.task import ReachCore
+from evo.episode import Episode
 from evo.learners.common import Policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -31,14 +32,14 @@ def play(
     env: EnvConfig,
     seed: int,
     episodes: int = 1,
-) -> tuple[ReachCore, list[Trajectory]]:
+) -> tuple[ReachCore, list[Episode]]:
     """Run ``episodes`` deterministic episodes one after another in one arena.
 
     Returns:
         The arena (its ``model`` describes the bodies) and the episodes.
     """
     core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed)
-    played: list[Trajectory] = []
+    played: list[Episode] = []
     core.watch(played.append)
     for _ in range(episodes):
         observation = core.reset()

@@ -61,7 +61,7 @@ def train_robot(
         task = bar.add_task(f"{learner.name} {robot.name}", total=learner.total_steps, status="")
 
         def show(row: dict[str, float]) -> None:
-            ret, ok = row["mean_return"], row["success_rate"]
+            ret, ok = row["train/mean_return"], row["train/success_rate"]
             status = "" if math.isnan(ret) else f"return {ret:+.3f}  success {ok:.0%}"
             bar.update(task, completed=min(row["env_steps"], learner.total_steps), status=status)
 

@@ -17,7 +17,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from evo.record.base import Episode, NullRecorder, Recorder, Recorders
+from evo.episode import Episode
+from evo.record.base import NullRecorder, Recorder, Recorders
 from evo.record.config import EpisodeChoice, RecordConfig, open_recorder, should_record
 
 if TYPE_CHECKING:

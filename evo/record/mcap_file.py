@@ -59,7 +59,8 @@ from foxglove.messages import (
     Vector3,
 )
 
-from evo.record.base import STILL_TOLERANCE, Episode, RecorderBase, check_options, prepare
+from evo.episode import Episode
+from evo.record.base import STILL_TOLERANCE, RecorderBase, check_options, prepare
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
 from evo.record.rows import encode_metadata, encode_row, json_number, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder

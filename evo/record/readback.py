@@ -24,7 +24,7 @@ from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap_protobuf.decoder import DecoderFactory
 
-from evo.record.base import Episode
+from evo.episode import Episode
 from evo.record.mcap_file import (
     METADATA,
     SUMMARY,
@@ -34,7 +34,7 @@ from evo.record.mcap_file import (
     TOPIC_TF,
     RecordError,
 )
-from evo.record.rows import decode_metadata, decode_row, from_json_number
+from evo.record.rows import current_curve_key, decode_metadata, decode_row, from_json_number
 
 
 @dataclass
@@ -120,12 +120,19 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
 
 
 def read_curve(path: str | Path) -> pd.DataFrame:
-    """The learning curve: one row per ``curve`` call, columns in first-seen order.
+    """The learning curve of an evaluation's ``.mcap`` file (or of a curve ``.csv``): one
+    row per ``curve`` call, columns in first-seen order.
 
-    Equals ``pandas.DataFrame(rows)`` of the rows written (up to the last flush).
+    Equals ``pandas.DataFrame(rows)`` of the rows written (up to the last flush). Keys
+    of recordings made before metric keys were namespaced come under their current
+    names (:func:`evo.record.rows.current_curve_key`).
     """
-    scan = _scan(path, [TOPIC_CURVE])
-    return pd.DataFrame([decode_row(m.data) for m in scan.messages[TOPIC_CURVE]])
+    if Path(path).suffix == ".csv":
+        curve = pd.read_csv(path)
+    else:
+        scan = _scan(path, [TOPIC_CURVE])
+        curve = pd.DataFrame([decode_row(m.data) for m in scan.messages[TOPIC_CURVE]])
+    return curve.rename(columns=current_curve_key)
 
 
 def read_json_topic(path: str | Path, topic: str) -> list[dict[str, Any]]:

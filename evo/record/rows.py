@@ -5,10 +5,10 @@ values and key order:
 
 * ``NaN`` is written as ``null`` (JSON has no NaN) and ``+-inf`` as the strings
   ``"Infinity"`` / ``"-Infinity"``; floats use Python's shortest round-trip repr.
-* Keys with slashes are nested (``loss/objective`` -> ``{"loss": {"objective": ...}}``)
-  so Foxglove's message paths reach them (``/train/curve.loss.objective``). When nesting
-  would change the key order or collide (``loss`` and ``loss/x`` both present) the row
-  is written flat instead; flattening joins nested keys with ``/`` either way.
+* Keys with slashes are nested (``train/kl`` -> ``{"train": {"kl": ...}}``) so
+  Foxglove's message paths reach them (``/train/curve.train.loss.objective``). When
+  nesting would change the key order or collide (``loss`` and ``loss/x`` both present)
+  the row is written flat instead; flattening joins nested keys with ``/`` either way.
 """
 
 from __future__ import annotations
@@ -20,6 +20,22 @@ from pathlib import PurePath
 from typing import Any
 
 import numpy as np
+
+CURVE_AXES = ("env_steps", "wall_seconds")
+"""Curve keys that are axes (what the metrics are plotted against): not namespaced."""
+METRIC_NAMESPACES = ("train/", "eval/", "ga/")
+
+
+def current_curve_key(key: str) -> str:
+    """``key`` as curve rows name it now.
+
+    Recordings made before metric keys were namespaced have ``mean_return``,
+    ``loss/critic``, ...; each such key was a training metric and is now ``train/<key>``.
+    """
+    if key in CURVE_AXES or key.startswith(METRIC_NAMESPACES):
+        return key
+    return f"train/{key}"
+
 
 _MISSING = object()
 _INF = {"Infinity": math.inf, "-Infinity": -math.inf}

@@ -9,7 +9,7 @@ Entities:
 * ``/episode/reward/<term>``, ``/episode/return``: per-frame reward terms and the
   running return on ``replay``; ``/episode/log``: one line per recorded episode.
 * ``/curve/<key>``: every learning-curve value on the ``env_step`` timeline (keys with
-  ``/`` become sub-paths, ``loss/critic`` -> ``/curve/loss/critic``).
+  ``/`` become sub-paths, ``train/loss/critic`` -> ``/curve/train/loss/critic``).
 * ``/metadata/<key>`` and ``/summary``: text documents.
 
 ``replay`` is the same clock as the MCAP file's (episodes end to end, 1 s apart).
@@ -32,7 +32,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 import rerun_bindings
 
-from evo.record.base import STILL_TOLERANCE, Episode, RecorderBase, check_options, prepare
+from evo.episode import Episode
+from evo.record.base import STILL_TOLERANCE, RecorderBase, check_options, prepare
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
 from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
@@ -98,10 +99,11 @@ def eval_blueprint() -> rrb.Blueprint:
     """3D replay on the left; learning curve, losses and episode rewards on the right."""
     curves = rrb.Tabs(
         rrb.TimeSeriesView(
-            name="return", origin="/curve", contents=["/curve/mean_return", "/curve/success_rate"]
+            name="return", origin="/curve/train",
+            contents=["/curve/train/mean_return", "/curve/train/success_rate"],
         ),
-        rrb.TimeSeriesView(name="losses", origin="/curve/loss"),
-        rrb.TimeSeriesView(name="reward terms", origin="/curve/reward"),
+        rrb.TimeSeriesView(name="losses", origin="/curve/train/loss"),
+        rrb.TimeSeriesView(name="reward terms", origin="/curve/train/reward"),
         rrb.TimeSeriesView(name="whole curve", origin="/curve"),
     )
     episode = rrb.TimeSeriesView(name="episode reward", origin="/episode")
