@@ -37,7 +37,7 @@ from analysis import plots
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
-from analysis.report import parser, report_folder
+from analysis.report import parser, report_folder, run_report
 from analysis.tables import fully_trained, method_order
 
 REPORT = "early_slope.md"
@@ -378,12 +378,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: --fractions: cuts are fractions of a budget, between 0 and 1 "
               f"(exclusive); got {', '.join(f'{f:g}' for f in outside)}", file=sys.stderr)
         return 2
-    try:
-        report = write_early_slope_report(
-            args.runs, args.out, retrained=args.retrained, methods=args.methods,
-            fractions=args.fractions, seed=args.seed, n_resamples=args.resamples)
-    except (FileNotFoundError, RunDirectoryError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    print(f"report: {report}")
-    return 0
+    return run_report(lambda: write_early_slope_report(
+        args.runs, args.out, retrained=args.retrained, methods=args.methods,
+        fractions=args.fractions, seed=args.seed, n_resamples=args.resamples))

@@ -407,7 +407,7 @@ def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:
 
 def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
     """Schema columns first, integer step and episode counts, run and birth order."""
-    for column in ("env_steps", "episodes"):
+    for column in ("env_steps", "train/episodes"):
         values = pd.to_numeric(curves[column], errors="coerce")
         curves[column] = values.astype(np.int64) if values.notna().all() else values
     order = robots[["run", "name", "birth"]]

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -431,17 +431,30 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
     return cli
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
-    args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
+def run_report(write: Callable[[], Path]) -> int:
+    """A report CLI's ending: print the written report's path, or the user's mistake.
+
+    Args:
+        write: Writes the report and returns its path; raises FileNotFoundError or
+            RunDirectoryError on a bad input.
+
+    Returns:
+        The exit status: 0, or 2 on a bad input (one ``error:`` line on stderr).
+    """
     try:
-        report = write_report(args.runs, args.out, seed=args.seed,
-                              n_resamples=args.resamples)
+        report = write()
     except (FileNotFoundError, RunDirectoryError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     print(f"report: {report}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
+    args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
+    return run_report(lambda: write_report(args.runs, args.out, seed=args.seed,
+                                           n_resamples=args.resamples))
 
 
 if __name__ == "__main__":

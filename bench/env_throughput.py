@@ -32,6 +32,7 @@ from rich.table import Table
 
 from evo.envs.arena import ArenaParams
 from evo.envs.reach import ReachEnv
+from evo.envs.task import ReachCore
 from evo.robot import load_robot
 
 
@@ -85,7 +86,8 @@ def main() -> None:
             arena = getattr(ArenaParams, arena_name)()
             for n in args.num_envs:
                 for nthread in args.nthread:
-                    env = ReachEnv(robot, arena=arena, num_envs=n, nthread=nthread, seed=0)
+                    env = ReachEnv(ReachCore(robot, arena=arena, num_envs=n, nthread=nthread,
+                                             seed=0))
                     steps = max(20, args.steps * 12 // n)
                     env_rate(env, steps // 4)  # warm up
                     # Interleaved repeats, best of each: the machine is shared and noisy.

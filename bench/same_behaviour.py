@@ -7,8 +7,8 @@ what they computed.
 The earlier commit is checked out into ``OUT/tree`` (``git worktree``) and both runs use
 this virtualenv. Compared, robot by robot: the ``history.csv`` columns (every one but
 wall times), the learning curves ``evals/<robot>.csv`` (every column but wall times;
-curve keys renamed since are matched through ``evo.record.rows.CURVE_ALIASES`` when it
-exists) and the policies ``evals/<robot>.pt`` (every tensor, bit for bit). Prints one
+curve keys renamed since are matched through ``evo.record.rows.current_curve_key``) and
+the policies ``evals/<robot>.pt`` (every tensor, bit for bit). Prints one
 line per comparison and exits 0 when everything is identical.
 """
 
@@ -24,6 +24,8 @@ from pathlib import Path
 import pandas as pd
 import torch
 from kill_resume import RUN as KILL_RESUME_RUN  # bench/ is on sys.path when this runs
+
+from evo.record.rows import current_curve_key
 
 REPO = Path(__file__).resolve().parents[1]
 RUN = [*KILL_RESUME_RUN, "record=off"]
@@ -43,13 +45,7 @@ def run(tree: Path, run_dir: Path, overrides: list[str]) -> None:
 
 def renamed(curve: pd.DataFrame) -> pd.DataFrame:
     """``curve`` with old curve keys under their current names, without wall times."""
-    try:
-        from evo.record.rows import CURVE_ALIASES  # type: ignore[attr-defined]
-    except ImportError:
-        aliases: dict[str, str] = {}
-    else:
-        aliases = dict(CURVE_ALIASES)
-    curve = curve.rename(columns=aliases)
+    curve = curve.rename(columns=current_curve_key)
     return curve.drop(columns=[c for c in curve if "wall_seconds" in c]).sort_index(axis=1)
 
 

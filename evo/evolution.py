@@ -394,4 +394,4 @@ class RunLog:
                     self.recorder.robot(row.name, build(robot, physics).compile(),
                                         fitness=row.fitness)
             finally:
-                self.recorder.close(summary)
+                self.recorder.close(summary or {})

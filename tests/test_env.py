@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import gymnasium as gym
 import mujoco
@@ -18,6 +19,8 @@ from evo.envs.arena import ArenaParams
 from evo.envs.params import REWARD_TERMS, TaskParams
 from evo.envs.reach import ReachEnv
 from evo.envs.task import ReachCore
+from evo.episode import Episode
+from evo.record.config import EpisodeChoice
 from evo.robot import Robot, load_robot
 
 EXAMPLES = ["four_wheeler", "inchworm", "snake", "twisted_four_wheeler"]
@@ -166,7 +169,7 @@ def test_rocks_lie_around_the_target_clear_of_the_start_and_move_when_pushed() -
 
 
 def test_injected_nan_ends_only_that_arena_flagged() -> None:
-    env = ReachEnv(robot(), num_envs=4, seed=0)
+    env = ReachEnv(ReachCore(robot(), num_envs=4, seed=0))
     td = env.reset()
     env.core.qvel[2, 0] = np.nan
     td["action"] = torch.zeros(4, env.core.action_size)
@@ -181,8 +184,41 @@ def test_injected_nan_ends_only_that_arena_flagged() -> None:
     assert env.core.steps.tolist() == [1, 1, 0, 1]
 
 
+def test_traced_episodes_are_numbered_and_a_blown_up_one_is_flagged_and_not_recorded(
+    tmp_path: Path,
+) -> None:
+    """The tracer numbers arena 0's episodes and marks the one a NaN ended ``unstable``;
+    the evaluation's sampler counts it but records only the stable ones."""
+    from evo.evaluation import EpisodeSampler
+    from evo.record import McapRecorder, RecordConfig, read_episodes
+
+    core = ReachCore(robot(), task=TaskParams(t_max=6), num_envs=2, seed=0)
+    seen: list[Episode] = []
+    core.watch(seen.append)
+    zero = np.zeros((2, core.action_size))
+    core.reset()
+    for _ in range(3):
+        core.step(zero)
+    core.qvel[0, 0] = np.nan
+    assert core.step(zero).unstable.tolist() == [True, False]
+    core.reset(np.array([True, False]))
+    for _ in range(6):
+        core.step(zero)
+    assert [(e.index, e.unstable) for e in seen] == [(0, True), (1, False)]
+    assert seen[0].frames == 5 and seen[1].frames == 7
+    assert np.all(np.diff(seen[1].time) > 0) and seen[1].env_step == core.steps_taken
+    everything = RecordConfig(episodes=EpisodeChoice(first=True, last=True, every=1))
+    with McapRecorder(tmp_path / "e.mcap", core.model, {}) as recorder:
+        sampler = EpisodeSampler(recorder, everything)
+        for episode in seen:
+            sampler(episode)
+        sampler.finish()
+    assert sampler.count == 2
+    assert [e.index for e in read_episodes(tmp_path / "e.mcap")] == [1]
+
+
 def test_partial_reset_touches_only_masked_arenas() -> None:
-    env = ReachEnv(robot(), num_envs=3, seed=0)
+    env = ReachEnv(ReachCore(robot(), num_envs=3, seed=0))
     td = env.reset()
     td["action"] = torch.zeros(3, env.core.action_size)
     for _ in range(5):
@@ -198,7 +234,8 @@ def test_partial_reset_touches_only_masked_arenas() -> None:
 
 @pytest.mark.parametrize("arena", ["clean", "cluttered"])
 def test_torchrl_env_passes_check_env_specs(arena: str) -> None:
-    env = ReachEnv(robot("snake"), arena=getattr(ArenaParams, arena)(), num_envs=5, seed=0)
+    env = ReachEnv(ReachCore(robot("snake"), arena=getattr(ArenaParams, arena)(), num_envs=5,
+                               seed=0))
     check_env_specs(env, seed=0)
     rollout = env.rollout(12, break_when_any_done=False)
     assert rollout.batch_size == torch.Size([5, 12])
@@ -221,7 +258,7 @@ def test_gymnasium_env_registered_and_passes_check_env() -> None:
 
 def test_gymnasium_and_torchrl_faces_agree() -> None:
     env = gym.make("evo/Reach-v0", robot=robot("inchworm")).unwrapped
-    batched = ReachEnv(robot("inchworm"), num_envs=1, seed=11)
+    batched = ReachEnv(ReachCore(robot("inchworm"), num_envs=1, seed=11))
     obs, _ = env.reset(seed=11)
     td = batched.reset()
     np.testing.assert_array_equal(obs, td["observation"][0].numpy())

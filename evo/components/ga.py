@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -240,8 +240,22 @@ class Evolve:
 
 # ---- the ga config group ----------------------------------------------------------------
 
-STRUCTURES = {"E": "evolve by crossover", "R": "a fresh random robot each time"}
-"""Structure strategy codes (``ga.structure``), the letter before ``+`` in a method name."""
+def _random_structures(ga: GAConfig, generator: GeneratorParams,
+                       limits: Limits) -> StructureStrategy:
+    return RandomStructures(generator, limits)
+
+
+def _evolve(ga: GAConfig, generator: GeneratorParams, limits: Limits) -> StructureStrategy:
+    return Evolve(ga.selection, generator, limits, ga.crossover_tries, ga.parent_tries,
+                  ga.mutation_rate, ga.mutation_operators)
+
+
+STRUCTURES: dict[str, Callable[[GAConfig, GeneratorParams, Limits], StructureStrategy]] = {
+    "E": _evolve, "R": _random_structures,
+}
+"""Structure strategies by code (``ga.structure``, the letter before ``+`` in a method
+name): each makes its strategy from the ``ga`` config, the generator and the limits.
+A new strategy is one entry here."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -295,11 +309,8 @@ class GAConfig:
                  limits: Limits | None = None) -> StructureStrategy:
         """The structure strategy ``structure`` names, making robots with ``generator``
         within ``limits`` (the ``morphology`` group; defaults when None)."""
-        generator, limits = generator or GeneratorParams(), limits or Limits()
-        if self.structure == "R":
-            return RandomStructures(generator, limits)
-        return Evolve(self.selection, generator, limits, self.crossover_tries,
-                      self.parent_tries, self.mutation_rate, self.mutation_operators)
+        return STRUCTURES[self.structure](self, generator or GeneratorParams(),
+                                          limits or Limits())
 
     def budgets(self) -> list[int]:
         """The training budget of every robot of the run, in birth order."""

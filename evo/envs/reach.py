@@ -24,8 +24,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from evo.envs.arena import ArenaParams
-from evo.envs.params import REWARD_TERMS, EnvConfig, TaskParams
+from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.task import ReachCore
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -40,32 +39,18 @@ def _column(values: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Ten
 
 
 class ReachEnv(EnvBase):  # type: ignore[misc]
-    """The reach task over ``num_envs`` arenas of one robot.
+    """The reach task over the arenas of ``core``, one robot in each, as a TorchRL env.
 
     Args:
-        robot: The robot structure.
-        physics: Module constants.
-        arena: The arena (``ArenaParams.clean()`` or ``.cluttered()``).
-        task: Task constants.
-        num_envs: Number of arenas (the batch size).
-        nthread: Threads MuJoCo uses to step the arenas.
-        seed: Seed of targets and rocks (``set_seed`` changes it later).
+        core: The batched task; its ``num_envs`` arenas are the batch (``set_seed``
+            re-seeds its targets and rocks).
     """
 
-    def __init__(
-        self,
-        robot: Robot,
-        physics: PhysicsParams | None = None,
-        arena: ArenaParams | None = None,
-        task: TaskParams | None = None,
-        num_envs: int = 1,
-        nthread: int = 1,
-        seed: int | None = None,
-    ) -> None:
-        super().__init__(batch_size=torch.Size([num_envs]), device=None)
-        self.core = ReachCore(robot, physics, arena, task, num_envs, nthread, seed)
+    def __init__(self, core: ReachCore) -> None:
+        super().__init__(batch_size=torch.Size([core.num_envs]), device=None)
+        self.core = core
         self.step_seconds = 0.0  # wall time inside _step, physics included
-        n = num_envs
+        n = core.num_envs
         self.observation_spec = Composite(
             observation=Unbounded((n, self.core.obs_size), dtype=torch.float32),
             reward_terms=Composite(
@@ -146,4 +131,4 @@ def make_env(
     robot: Robot, physics: PhysicsParams, env: EnvConfig, num_envs: int, seed: int | None
 ) -> ReachEnv:
     """A ``ReachEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes."""
-    return ReachEnv(robot, physics, env.arena, env.task, num_envs, env.nthread, seed)
+    return ReachEnv(ReachCore(robot, physics, env.arena, env.task, num_envs, env.nthread, seed))

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from types import TracebackType
-from typing import Any, Protocol, Self, runtime_checkable
+from typing import Any, Protocol, Self, TypedDict, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -78,14 +79,20 @@ def prepare(
     return Frames(ep, stamps, 1 + np.flatnonzero(mask), 1 + np.flatnonzero(~mask))
 
 
-def check_options(flush_every: int, frame_stride: int, still_tolerance: float) -> None:
-    """The recorders' shared keyword checks."""
-    if flush_every < 1 or frame_stride < 1:
-        raise ValueError(
-            f"flush_every and frame_stride must be >= 1, got {flush_every} and {frame_stride}"
-        )
-    if still_tolerance < 0:
-        raise ValueError(f"still_tolerance must be >= 0, got {still_tolerance}")
+class RecorderOptions(TypedDict, total=False):
+    """The keyword options of every evaluation recorder.
+
+    Attributes:
+        flush_every: Flush (MCAP) or send (rerun) the curve every this many rows (10).
+        frame_stride: Keep every n-th frame of an episode (1; see ``Episode.strided``).
+        still_tolerance: A body whose pose stays this close (m, quaternion units) to its
+            first frame's all episode long is written once per episode; 0 = only exactly
+            still (``STILL_TOLERANCE``).
+    """
+
+    flush_every: int
+    frame_stride: int
+    still_tolerance: float
 
 
 @runtime_checkable
@@ -118,6 +125,28 @@ class RecorderBase:
     """
 
     closed: bool = False
+    flush_every: int
+    frame_stride: int
+    still_tolerance: float
+    path: Path
+    body_names: tuple[str, ...]
+
+    def _set_options(self, options: RecorderOptions) -> None:
+        """Check and keep the :class:`RecorderOptions` (defaults for those not given)."""
+        self.flush_every = options.get("flush_every", 10)
+        self.frame_stride = options.get("frame_stride", 1)
+        self.still_tolerance = options.get("still_tolerance", STILL_TOLERANCE)
+        if self.flush_every < 1 or self.frame_stride < 1:
+            raise ValueError(f"flush_every and frame_stride must be >= 1, got "
+                             f"{self.flush_every} and {self.frame_stride}")
+        if self.still_tolerance < 0:
+            raise ValueError(f"still_tolerance must be >= 0, got {self.still_tolerance}")
+
+    def _frames(self, episode: Episode, clock_ns: int) -> Frames:
+        """``episode`` checked against the recorder's model and made ready to write."""
+        return prepare(episode, nbody=len(self.body_names), where=self.path,
+                       stride=self.frame_stride, tolerance=self.still_tolerance,
+                       clock_ns=clock_ns)
 
     def __enter__(self) -> Self:
         return self

@@ -108,11 +108,11 @@ def open_recorder(
     Returns:
         A ``Recorders`` fan-out, or a ``NullRecorder`` when recording is off.
     """
-    from evo.record.base import NullRecorder, Recorders
+    from evo.record.base import NullRecorder, RecorderOptions, Recorders
 
     folder = Path(directory)
     meta = {"name": name, **metadata}
-    options: dict[str, Any] = {
+    options: RecorderOptions = {
         "flush_every": config.flush_every,
         "frame_stride": config.frame_stride,
         "still_tolerance": config.still_tolerance,

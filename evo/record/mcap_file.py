@@ -37,7 +37,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Unpack
 
 import foxglove
 import mujoco
@@ -60,9 +60,9 @@ from foxglove.messages import (
 )
 
 from evo.episode import Episode
-from evo.record.base import STILL_TOLERANCE, RecorderBase, check_options, prepare
+from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
-from evo.record.rows import encode_metadata, encode_row, json_number, plain
+from evo.record.rows import encode_metadata, encode_row, json_number, object_schema, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder
 
 TOPIC_SCENE = "/scene"
@@ -77,35 +77,16 @@ F64 = npt.NDArray[np.float64]
 EPISODE_GAP_NS = 1_000_000_000
 """Gap between two recorded episodes on the replay clock, ns."""
 
-_CURVE_SCHEMA: dict[str, Any] = {
-    "title": "evo.CurveRow",
-    "description": "One learning-curve row; keys with '/' nest (loss/critic -> loss.critic).",
-    "type": "object",
-    "properties": {"env_steps": {"type": "number"}},
-    "additionalProperties": True,
-}
-_EPISODE_SCHEMA: dict[str, Any] = {
-    "title": "evo.Episode",
-    "type": "object",
-    "properties": {
-        "index": {"type": "integer"},
-        "env_step": {"type": "integer"},
-        "success": {"type": "boolean"},
-        "frames": {"type": "integer"},
-        "target": {"type": "array", "items": {"type": "number"}},
-    },
-}
-_STEP_SCHEMA: dict[str, Any] = {
-    "title": "evo.EpisodeStep",
-    "type": "object",
-    "properties": {
-        "episode": {"type": "integer"},
-        "step": {"type": "integer"},
-        "sim_time": {"type": "number"},
-        "reward": {"type": "object", "additionalProperties": {"type": "number"}},
-        "return": {"type": "number"},
-    },
-}
+_CURVE_SCHEMA = object_schema(
+    "evo.CurveRow", {"env_steps": "number"}, additional=True,
+    description="One learning-curve row; keys with '/' nest (train/kl -> train.kl).")
+_EPISODE_SCHEMA = object_schema("evo.Episode", {
+    "index": "integer", "env_step": "integer", "success": "boolean", "frames": "integer",
+    "target": {"type": "array", "items": {"type": "number"}}})
+_STEP_SCHEMA = object_schema("evo.EpisodeStep", {
+    "episode": "integer", "step": "integer", "sim_time": "number",
+    "reward": {"type": "object", "additionalProperties": {"type": "number"}},
+    "return": "number"})
 
 
 class RecordError(RuntimeError):
@@ -249,27 +230,15 @@ class McapRecorder(RecorderBase):
         path: The MCAP file to create.
         model: The compiled model of the whole scene (robot, arena, rocks, target).
         metadata: Robot JSON, resolved config, seed, method, ... (JSON-able values).
-        flush_every: Flush to disk every this many curve rows.
-        frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
-        still_tolerance: A body whose pose stays this close (m, quaternion units) to
-            its first frame's all episode long is written once; 0 = only exactly still.
+        **options: :class:`evo.record.base.RecorderOptions` (flush to disk every
+            ``flush_every`` curve rows).
     """
 
-    def __init__(
-        self,
-        path: str | Path,
-        model: mujoco.MjModel,
-        metadata: Mapping[str, Any],
-        *,
-        flush_every: int = 10,
-        frame_stride: int = 1,
-        still_tolerance: float = STILL_TOLERANCE,
-    ) -> None:
-        check_options(flush_every, frame_stride, still_tolerance)
+    def __init__(self, path: str | Path, model: mujoco.MjModel, metadata: Mapping[str, Any],
+                 **options: Unpack[RecorderOptions]) -> None:
+        self._set_options(options)
         self.file = McapFile(path, metadata)
         self.path = self.file.path
-        self.flush_every, self.frame_stride = flush_every, frame_stride
-        self.still_tolerance = still_tolerance
         geometry = scene_geometry(model)
         self.body_names = geometry.body_names
         self._encoders: dict[tuple[str, ...], TransformEncoder] = {}
@@ -312,14 +281,7 @@ class McapRecorder(RecorderBase):
         transform at the episode's start instead of one per frame.
         """
         self._check_open()
-        frames = prepare(
-            episode,
-            nbody=len(self.body_names),
-            where=self.path,
-            stride=self.frame_stride,
-            tolerance=self.still_tolerance,
-            clock_ns=self._clock_ns,
-        )
+        frames = self._frames(episode, self._clock_ns)
         ep, stamps = frames.episode, frames.stamps.tolist()
         names = np.array(self.body_names)
         moving, still = names[frames.moving].tolist(), names[frames.still].tolist()

@@ -142,6 +142,21 @@ def plain(value: Any) -> Any:
     return value
 
 
+def object_schema(title: str, properties: Mapping[str, str | dict[str, Any]], *,
+                  description: str = "", additional: bool = False) -> dict[str, Any]:
+    """The JSON Schema of an MCAP JSON channel's messages: an object with ``properties``
+    (a string is that JSON type), open to other keys when ``additional``."""
+    schema: dict[str, Any] = {"title": title}
+    if description:
+        schema["description"] = description
+    schema["type"] = "object"
+    schema["properties"] = {k: {"type": v} if isinstance(v, str) else v
+                            for k, v in properties.items()}
+    if additional:
+        schema["additionalProperties"] = True
+    return schema
+
+
 _JSON_KEYS = "evo.json_keys"
 """Metadata key listing the keys whose values are JSON (the others are plain strings)."""
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Unpack
 
 import mujoco
 import numpy as np
@@ -33,7 +33,7 @@ import rerun.blueprint as rrb
 import rerun_bindings
 
 from evo.episode import Episode
-from evo.record.base import STILL_TOLERANCE, RecorderBase, check_options, prepare
+from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
 from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
@@ -193,26 +193,14 @@ class RerunRecorder(RecorderBase):
         model: The compiled model of the whole scene (robot, arena, rocks, target).
         metadata: Robot JSON, resolved config, seed, method, ...; ``metadata["name"]``
             (else the file name) is the recording id.
-        flush_every: Send buffered curve rows every this many rows.
-        frame_stride: Keep every n-th frame of an episode (see ``Episode.strided``).
-        still_tolerance: Bodies at rest within this (m, quaternion units) get one
-            transform per episode instead of one per frame.
+        **options: :class:`evo.record.base.RecorderOptions` (buffered curve rows are
+            sent every ``flush_every`` rows; bodies at rest get one transform per episode).
     """
 
-    def __init__(
-        self,
-        path: str | Path,
-        model: mujoco.MjModel,
-        metadata: Mapping[str, Any],
-        *,
-        flush_every: int = 10,
-        frame_stride: int = 1,
-        still_tolerance: float = STILL_TOLERANCE,
-    ) -> None:
-        check_options(flush_every, frame_stride, still_tolerance)
+    def __init__(self, path: str | Path, model: mujoco.MjModel, metadata: Mapping[str, Any],
+                 **options: Unpack[RecorderOptions]) -> None:
+        self._set_options(options)
         self.path = Path(path)
-        self.flush_every, self.frame_stride = flush_every, frame_stride
-        self.still_tolerance = still_tolerance
         name = str(metadata.get("name", self.path.stem))
         self._rec: rr.RecordingStream | None = open_rrd(
             self.path, name, eval_blueprint(), f"/{SCENE}"
@@ -256,14 +244,7 @@ class RerunRecorder(RecorderBase):
 
     def episode(self, episode: Episode) -> None:
         """Send one episode's body poses and rewards on the ``replay`` timeline."""
-        frames = prepare(
-            episode,
-            nbody=len(self.body_names),
-            where=self.path,
-            stride=self.frame_stride,
-            tolerance=self.still_tolerance,
-            clock_ns=self._clock_ns,
-        )
+        frames = self._frames(episode, self._clock_ns)
         ep, stamps = frames.episode, frames.stamps
         clock = rr.TimeColumn(REPLAY, duration=stamps.astype("timedelta64[ns]"))
         start = rr.TimeColumn(REPLAY, duration=stamps[:1].astype("timedelta64[ns]"))

@@ -19,8 +19,7 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
-from typing import Any, Self
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -30,10 +29,11 @@ import rerun.blueprint as rrb
 from foxglove.channels import SceneUpdateChannel
 from foxglove.messages import Color, Pose, SceneUpdate, TextPrimitive, Vector3
 
+from evo.record.base import RecorderBase
 from evo.record.geometry import Geometry, rest_pose, scene_geometry
 from evo.record.mcap_file import McapFile, scene_entity
 from evo.record.readback import read_json_topic
-from evo.record.rows import flatten, json_number, plain
+from evo.record.rows import flatten, json_number, object_schema, plain
 from evo.record.rrd import entity, finish_rrd, log_geometry, open_rrd, release_streams
 
 TOPIC_BIRTHS = "/ga/births"
@@ -42,19 +42,9 @@ BIRTH = "birth"
 ROBOT_SPACING = 0.4
 """Distance between neighbouring robots in the run's robot scene, m."""
 
-_BIRTH_SCHEMA: dict[str, Any] = {
-    "title": "evo.Birth",
-    "type": "object",
-    "properties": {
-        "birth": {"type": "integer"},
-        "name": {"type": "string"},
-        "fitness": {"type": "number"},
-        "accepted": {"type": "boolean"},
-        "population_best": {"type": "number"},
-        "population_mean": {"type": "number"},
-    },
-    "additionalProperties": True,
-}
+_BIRTH_SCHEMA = object_schema("evo.Birth", {
+    "birth": "integer", "name": "string", "fitness": "number", "accepted": "boolean",
+    "population_best": "number", "population_mean": "number"}, additional=True)
 
 
 @dataclass(frozen=True)
@@ -119,7 +109,7 @@ def read_births(path: str | Path) -> pd.DataFrame:
     return pd.DataFrame([flatten(row) for row in read_json_topic(path, TOPIC_BIRTHS)])
 
 
-class RunRecorder:
+class RunRecorder(RecorderBase):
     """Writes ``run.mcap`` and ``run.rrd`` for a whole evolution run.
 
     Args:
@@ -151,7 +141,6 @@ class RunRecorder:
                 raise
         self._robots = 0
         self._last_birth = 0
-        self.closed = False
         if self.mcap is not None:
             self._births = self.mcap.json_channel(TOPIC_BIRTHS, _BIRTH_SCHEMA)
             self._scene = SceneUpdateChannel(TOPIC_ROBOTS, context=self.mcap.context)
@@ -226,30 +215,16 @@ class RunRecorder:
         self._scene.log(SceneUpdate(entities=[item]), log_time=self._last_birth * 1_000_000_000)
         self.mcap.flush()
 
-    def close(self, summary: Mapping[str, Any] | None = None) -> None:
-        """Finish both files with ``summary`` (best fitness, ...); later calls do nothing."""
-        if self.closed:
-            return
-        self.closed = True
+    def _close(self, summary: Mapping[str, Any]) -> None:
+        """Finish both files with ``summary`` (best fitness, ...)."""
         try:
             if self.mcap is not None:
-                self.mcap.close(summary or {})
+                self.mcap.close(summary)
         finally:
             if self.rec is not None:
                 finish_rrd(self.rec)
                 self.rec = None
                 release_streams()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close({} if exc is None else {"status": "failed", "error": repr(exc)})
 
 
 def _style_series(rec: rr.RecordingStream) -> None:
