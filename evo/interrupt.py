@@ -51,8 +51,7 @@ class Interrupted(BaseException):  # noqa: N818 - like KeyboardInterrupt, not an
 
 _held: list[int] = []  # signals that arrived inside a critical block
 _depth = 0  # nesting of critical blocks
-_stopping = False  # a signal was raised: ignore the next ones
-_raised: int | None = None  # the signal last raised as Interrupted in this process
+_raised: int | None = None  # the signal raised as Interrupted: ignore the next ones
 
 
 def _interrupt(signum: int) -> Interrupted:
@@ -73,43 +72,41 @@ def raised() -> Interrupted | None:
 
 
 def _on_signal(signum: int, frame: FrameType | None) -> None:
-    global _stopping
-    if _stopping:
+    if _raised is not None:
         return
     if _depth:
         _held.append(signum)
         return
-    _stopping = True
     raise _interrupt(signum)
 
 
 @contextmanager
 def handle_signals() -> Iterator[None]:
     """Raise :class:`Interrupted` on SIGINT and SIGTERM inside the block (main thread)."""
-    global _stopping, _raised
+    global _raised
     before = {s: signal.signal(s, _on_signal) for s in EXIT_CODES}
-    _stopping, _raised = False, None
+    _raised = None
     try:
         yield
     finally:
         for s, handler in before.items():
             signal.signal(s, handler)
         _held.clear()
+        _raised = None
 
 
 @contextmanager
 def critical() -> Iterator[None]:
     """Hold back SIGINT and SIGTERM until the block ends (then raise the first one)."""
-    global _depth, _stopping
+    global _depth
     _depth += 1
     try:
         yield
     finally:
         _depth -= 1
-    if not _depth and _held and not _stopping:
+    if not _depth and _held and _raised is None:
         signum = _held[0]
         _held.clear()
-        _stopping = True
         raise _interrupt(signum)
 
 

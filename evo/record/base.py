@@ -56,29 +56,6 @@ class Frames:
     still: npt.NDArray[np.intp]
 
 
-def prepare(
-    episode: Episode, *, nbody: int, where: object, stride: int, tolerance: float, clock_ns: int
-) -> Frames:
-    """Check ``episode`` against the model, apply the stride, place it on the clock.
-
-    Args:
-        episode: As handed over by the learner.
-        nbody: Bodies of the recorder's model (world included).
-        where: The file written, for error messages.
-        stride: Frame stride (``Episode.strided``).
-        tolerance: Bodies moving less than this are "still" (0 = only exactly still).
-        clock_ns: Replay-clock time of the first frame, ns.
-    """
-    if episode.nbody != nbody:
-        raise ValueError(
-            f"{where}: episode {episode.index} has {episode.nbody} bodies, the model has {nbody}"
-        )
-    ep = episode.strided(stride)
-    stamps = clock_ns + np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
-    mask = moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:], tolerance)
-    return Frames(ep, stamps, 1 + np.flatnonzero(mask), 1 + np.flatnonzero(~mask))
-
-
 class RecorderOptions(TypedDict, total=False):
     """The keyword options of every evaluation recorder.
 
@@ -143,10 +120,17 @@ class RecorderBase:
             raise ValueError(f"still_tolerance must be >= 0, got {self.still_tolerance}")
 
     def _frames(self, episode: Episode, clock_ns: int) -> Frames:
-        """``episode`` checked against the recorder's model and made ready to write."""
-        return prepare(episode, nbody=len(self.body_names), where=self.path,
-                       stride=self.frame_stride, tolerance=self.still_tolerance,
-                       clock_ns=clock_ns)
+        """``episode`` checked against the recorder's model, strided (``frame_stride``),
+        its bodies split into moving and still (``still_tolerance``) and placed on the
+        replay clock from ``clock_ns`` (the time of its first frame, ns)."""
+        nbody = len(self.body_names)
+        if episode.nbody != nbody:
+            raise ValueError(f"{self.path}: episode {episode.index} has {episode.nbody} "
+                             f"bodies, the model has {nbody}")
+        ep = episode.strided(self.frame_stride)
+        stamps = clock_ns + np.round((ep.time - ep.time[0]) * 1e9).astype(np.int64)
+        mask = moving_bodies(ep.xpos[:, 1:], ep.xquat[:, 1:], self.still_tolerance)
+        return Frames(ep, stamps, 1 + np.flatnonzero(mask), 1 + np.flatnonzero(~mask))
 
     def __enter__(self) -> Self:
         return self

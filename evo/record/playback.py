@@ -12,14 +12,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import mujoco
-import numpy as np
-import numpy.typing as npt
 
 from evo.episode import Episode
 from evo.record.rrd import RerunRecorder
 from evo.robot.tree import Robot
-
-F64 = npt.NDArray[np.float64]
 
 
 def write_replay_rrd(
