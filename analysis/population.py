@@ -29,13 +29,34 @@ def population_trace(robots: pd.DataFrame, population_size: int = 20) -> pd.Data
     """
     require_columns(robots, ("run", "birth", "name", "fitness", "accepted"), "robots table")
     parts = [
-        _replay(run_rows.sort_values("birth"), population_size)
+        _replay(run_rows.sort_values("birth"), population_size)[0]
         for _, run_rows in robots.groupby("run", sort=True)
     ]
     return pd.concat(parts, ignore_index=True)
 
 
-def _replay(rows: pd.DataFrame, population_size: int) -> pd.DataFrame:
+def final_population(robots: pd.DataFrame, population_size: int = 20) -> pd.DataFrame:
+    """The fitness of every member of each run's population after its last robot.
+
+    Args:
+        robots: Robots table (``run``, ``birth``, ``name``, ``fitness``, ``accepted``).
+        population_size: Size of the initial population (SPEC default 20).
+
+    Returns:
+        ``run`` and ``fitness``, one row per member (``population_size`` per run that
+        has that many robots), runs sorted.
+    """
+    require_columns(robots, ("run", "birth", "name", "fitness", "accepted"), "robots table")
+    parts = [
+        pd.DataFrame(dict(run=run, fitness=_replay(rows.sort_values("birth"),
+                                                   population_size)[1]))
+        for run, rows in robots.groupby("run", sort=True)
+    ]
+    return pd.concat(parts, ignore_index=True)
+
+
+def _replay(rows: pd.DataFrame, population_size: int) -> tuple[pd.DataFrame, list[float]]:
+    """The trace of one run's rows in birth order, and its population at the end."""
     population: list[float] = []
     threshold, pop_min, pop_mean, pop_max = [], [], [], []
     for i, (fitness, accepted) in enumerate(zip(rows["fitness"], rows["accepted"],
@@ -54,7 +75,7 @@ def _replay(rows: pd.DataFrame, population_size: int) -> pd.DataFrame:
     return pd.DataFrame(dict(
         run=rows["run"].to_numpy(), birth=rows["birth"].to_numpy(), name=rows["name"].to_numpy(),
         threshold=threshold, pop_min=pop_min, pop_mean=pop_mean, pop_max=pop_max,
-    ))
+    )), population
 
 
 def best_so_far(robots: pd.DataFrame) -> pd.DataFrame:

@@ -192,9 +192,9 @@ class EarlyRejection:
     """
 
     enabled: bool = False
-    checkpoints: tuple[float, ...] = (0.2, 0.35, 0.5)
+    checkpoints: tuple[float, ...] = (0.5,)
     predictor: str = "value"
-    margin: float = 0.1
+    margin: float = 0.3
     last: int = 3
 
     def __post_init__(self) -> None:

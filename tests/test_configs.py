@@ -48,7 +48,9 @@ from evo.main import (
 REPO = Path(__file__).resolve().parents[1]
 CONF = REPO / "conf"
 EXPERIMENTS = sorted(p.stem for p in (CONF / "exp").glob("*.yaml"))
-GROUPS = sorted(p.name for p in CONF.iterdir() if p.is_dir() and p.name not in ("exp", "hydra"))
+GROUPS = sorted(p.relative_to(CONF).as_posix() for p in CONF.rglob("*")
+                if p.is_dir() and p.relative_to(CONF).parts[0] not in ("exp", "hydra"))
+"""Config groups, nested ones (``ga/structure``) included."""
 METHODS = {"E+L", "E+R", "R+L", "R+R"}
 EXECUTORS = {"local": LocalExecutor, "serial": SerialExecutor, "ray": RayExecutor}
 
@@ -117,6 +119,10 @@ def test_every_group_option_builds_an_evolution(
         assert (parts.job.env.arena.n_rocks > 0) is (option == "cluttered")
     if group == "ga":
         assert isinstance(parts.strategy, Evolve) and isinstance(parts.strategy.selection, Roulette)
+    if group == "ga/structure":
+        strategy = {"evolve": Evolve, "random": RandomStructures}[option]
+        assert type(parts.strategy) is strategy
+        assert parts.job.method == ("E+L" if option == "evolve" else "R+L")
 
 
 @pytest.mark.parametrize("experiment", EXPERIMENTS)

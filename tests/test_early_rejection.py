@@ -256,3 +256,43 @@ def test_the_offline_replay_makes_the_decisions_the_run_made(early_reference: Pa
     assert len(offspring) >= 4
     assert (offspring["stopped"] == (status[offspring["name"]] == "stopped-early").to_numpy()
             ).all(), offspring
+
+
+@pytest.mark.slow
+def test_the_equal_cost_report_counts_what_the_run_with_the_rule_saved_and_kept(
+    early_reference: Path, serial_reference: Path, tmp_path: Path
+) -> None:
+    """``analysis.equal_cost`` on a run with the rule and one without: its per-run
+    figures are the runs' own (summary.json, population.json), a stopped robot is never
+    a best or a member, and the report and figure are written."""
+    from analysis.equal_cost import main
+
+    assert main(["--without", str(serial_reference), "--with", str(early_reference),
+                 "--out", str(tmp_path)]) == 0
+    table = pd.read_csv(tmp_path / "equal_cost_runs.csv").set_index("side")
+    for side, run_dir in (("with", early_reference), ("without", serial_reference)):
+        summary = json.loads((run_dir / "summary.json").read_text())
+        members = [m["fitness"] for m in json.loads(
+            (run_dir / "population.json").read_text())["population"]]
+        row = table.loc[side]
+        assert row["env_steps"] == summary["env_steps"]
+        assert row["saved"] == summary["env_steps_saved"]
+        assert row["stopped_early"] == summary["stopped_early"]
+        assert row["best"] == pytest.approx(summary["best_fitness"])
+        assert row["pop_mean"] == pytest.approx(np.mean(members))
+        assert row["pop_min"] == pytest.approx(min(members))
+    assert table.loc["with", "stopped_early"] >= 2
+    report = (tmp_path / "equal_cost.md").read_text()
+    assert "## At equal cost" in report and "Mann–Whitney" in report
+    assert (tmp_path / "equal_cost.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_run_without_the_rule_is_read_at_the_env_steps_the_run_with_it_spent() -> None:
+    from analysis.equal_cost import at_env_steps
+
+    trace = pd.DataFrame(dict(run="a", env_steps=[10, 20, 30, 40],
+                              pop_max=[0.1, 0.2, 0.3, 0.4]))
+    row, evaluated = at_env_steps(trace, "a", 35)
+    assert (row["pop_max"], evaluated) == (0.3, 3)
+    row, evaluated = at_env_steps(trace, "a", 5)
+    assert (row["pop_max"], evaluated) == (0.1, 1), "before its first robot: the first"
