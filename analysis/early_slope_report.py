@@ -326,6 +326,7 @@ def write_early_slope_report(
     fractions: Sequence[float] = es.FRACTIONS,
     seed: int = 0,
     n_resamples: int = 2000,
+    first: int | None = None,
 ) -> Path:
     """Load runs, run the study, draw its figures and write ``out/early_slope.md``.
 
@@ -337,12 +338,13 @@ def write_early_slope_report(
         fractions: Cuts, as fractions of each robot's budget.
         seed: Seed of the bootstrap randomness.
         n_resamples: Bootstrap resamples per interval.
+        first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
         The path of the Markdown report.
     """
     out = report_folder(out)
-    runs = load_runs(paths)
+    runs = load_runs(paths, first)
     if study_robots(runs.robots, methods)[0].empty:
         raise RunDirectoryError(
             f"{', '.join(map(str, paths))}: no robot with a fitness of the methods "
@@ -380,4 +382,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     return run_report(lambda: write_early_slope_report(
         args.runs, args.out, retrained=args.retrained, methods=args.methods,
-        fractions=args.fractions, seed=args.seed, n_resamples=args.resamples))
+        fractions=args.fractions, seed=args.seed, n_resamples=args.resamples,
+        first=args.first))

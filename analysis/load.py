@@ -317,11 +317,13 @@ def curves_of_run(run: str, run_dir: Path, names: Iterable[str]) -> tuple[pd.Dat
 # ---------------------------------------------------------------- many runs
 
 
-def load_runs(paths: PathsLike) -> Runs:
+def load_runs(paths: PathsLike, first: int | None = None) -> Runs:
     """Read run directories into the robots and curves tables.
 
     Args:
         paths: Run directories, or folders holding them (a Hydra multirun folder).
+        first: Keep only each run's first ``first`` robots (births below it), to compare
+            runs of different lengths over the same robots; None keeps them all.
 
     Returns:
         The tables, one row per run, and notes on the input.
@@ -341,6 +343,9 @@ def load_runs(paths: PathsLike) -> Runs:
         method = run_method(run_dir, history, config)
         seed = _int_setting(config, "seed", run_dir)
         table = robots_of_run(run, method, seed, history)
+        if first is not None:
+            notes.append(_first_note(run, table, first))
+            table = table[table["birth"] < first].reset_index(drop=True)
         run_curves, sources = curves_of_run(run, run_dir, table["name"])
         table["curve_source"] = sources
         csv_names = table.loc[table["curve_source"] == "csv", "name"].tolist()
@@ -368,6 +373,15 @@ def load_runs(paths: PathsLike) -> Runs:
     robots_table = robots_table[[*ROBOT_COLUMNS, *EXTRA_ROBOT_COLUMNS]]
     curves_table = _tidy_curves(pd.concat(curves, ignore_index=True), robots_table)
     return Runs(robots_table, curves_table, pd.DataFrame(runs, columns=list(RUN_COLUMNS)), notes)
+
+
+def _first_note(run: str, table: pd.DataFrame, first: int) -> str:
+    """What ``load_runs(first=...)`` kept of one run."""
+    kept = int((table["birth"] < first).sum())
+    if kept < first:
+        return (f"run {run}: {kept} robot(s) born before {first} (fewer than the "
+                f"{first} asked for)")
+    return f"run {run}: its first {first} robots of {len(table)}"
 
 
 def _whole_rows(history: pd.DataFrame, path: Path) -> tuple[pd.DataFrame, int]:

@@ -373,6 +373,7 @@ def write_report(
     *,
     seed: int = 0,
     n_resamples: int = 2000,
+    first: int | None = None,
 ) -> Path:
     """Load runs, compute the tables, draw the figures and write ``out/report.md``.
 
@@ -381,12 +382,13 @@ def write_report(
         out: Report folder (created).
         seed: Seed of the bootstrap randomness.
         n_resamples: Bootstrap resamples per interval.
+        first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
         The path of the Markdown report.
     """
     out = report_folder(out)
-    runs = load_runs(paths)
+    runs = load_runs(paths, first)
     if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
         raise RunDirectoryError(
             f"{', '.join(map(str, paths))}: no robot with a fitness (no evaluation finished)")
@@ -428,7 +430,18 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
     cli.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     cli.add_argument("--resamples", type=int, default=2000,
                      help="bootstrap resamples per confidence interval")
+    cli.add_argument("--first", type=_positive, default=None, metavar="N",
+                     help="only each run's first N robots (runs of different lengths "
+                          "compared over the same robots)")
     return cli
+
+
+def _positive(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    return value
 
 
 def run_report(write: Callable[[], Path]) -> int:
@@ -454,7 +467,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
     args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
     return run_report(lambda: write_report(args.runs, args.out, seed=args.seed,
-                                           n_resamples=args.resamples))
+                                           n_resamples=args.resamples, first=args.first))
 
 
 if __name__ == "__main__":

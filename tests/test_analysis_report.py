@@ -109,6 +109,20 @@ def test_load_gives_one_row_per_history_row_and_the_mcap_curves(ablation: Path) 
                                           check_dtype=False, obj=f"curve of {run.run}/{name}")
 
 
+def test_load_keeps_each_runs_first_robots_and_says_so(ablation: Path) -> None:
+    """``first``: the first N births of every run, with their curves, and a note."""
+    whole = load_runs(ablation)
+    runs = load_runs(ablation, first=4)
+    expected = whole.robots[whole.robots["birth"] < 4].reset_index(drop=True)
+    pd.testing.assert_frame_equal(runs.robots, expected)
+    assert set(runs.curves["name"]) == set(expected["name"])
+    assert (runs.runs["robots"] == 4).all()
+    assert sum("its first 4 robots of 6" in note for note in runs.notes) == 4
+    more = load_runs(ablation, first=10)
+    assert len(more.robots) == len(whole.robots)
+    assert any("fewer than the 10 asked for" in note for note in more.notes)
+
+
 def test_load_falls_back_to_the_csv_only_when_the_mcap_is_missing(
     ablation: Path, tmp_path: Path
 ) -> None:

@@ -132,6 +132,10 @@ def test_reports_name_an_output_that_is_a_file_and_cuts_beyond_the_budget(
     assert early_slope_main([str(run_dir), "--out", str(tmp_path / "es"),
                              "--fractions", "0.5", "1.5"]) == 2
     one_line_error(capsys.readouterr().err, "--fractions", "1.5")
+    with pytest.raises(SystemExit) as exited:
+        report_main([str(run_dir), "--out", str(tmp_path / "r"), "--first", "0"])
+    assert exited.value.code == 2
+    assert "--first" in capsys.readouterr().err and not (tmp_path / "r").exists()
     assert afile.read_text() == "keep"
 
 
