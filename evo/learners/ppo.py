@@ -9,14 +9,15 @@ comparable.
 
 Learning-curve row (one per collector batch; every value a float):
 
-* ``env_steps``: env steps taken so far; ``episodes``: episodes completed in the batch;
-* ``mean_return``, ``success_rate``, ``episode_length``: over the episodes completed in
-  the batch (NaN when none completed);
-* ``reward/<term>``: mean per env step of each reward term in the batch;
-* ``loss/objective``, ``loss/critic``, ``loss/entropy``, ``entropy``, ``kl``,
-  ``clip_fraction``, ``lr``: means over the batch's minibatch updates (NaN when the
-  learner does not update);
-* ``wall_seconds``: since the start of training.
+* ``env_steps``: env steps taken so far; ``wall_seconds``: since the start of training
+  (the two axes, unprefixed);
+* ``train/episodes``: episodes completed in the batch;
+* ``train/mean_return``, ``train/success_rate``, ``train/episode_length``: over the
+  episodes completed in the batch (NaN when none completed);
+* ``train/reward/<term>``: mean per env step of each reward term in the batch;
+* ``train/loss/objective``, ``train/loss/critic``, ``train/loss/entropy``,
+  ``train/entropy``, ``train/kl``, ``train/clip_fraction``, ``train/lr``: means over the
+  batch's minibatch updates (NaN when the learner does not update).
 """
 
 from __future__ import annotations
