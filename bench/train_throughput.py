@@ -15,6 +15,10 @@ on ``--nthread`` physics threads and prints, from the same run:
 With ``--quality`` it also evaluates the trained policy deterministically (20 episodes)
 and prints the success rate: use ``--steps 150000`` for the learning-quality figures;
 ``--curves DIR`` keeps every run's learning curve (CSV) and draws them (``curves.png``).
+With ``--profile`` it trains each robot once more under ``cProfile`` (after the timed
+run, so the figures above are not slowed) and prints where the time goes by library
+(MuJoCo, torch, tensordict, TorchRL, numpy, evo, the rest of Python), with the costliest
+functions of each: the per-step cost outside MuJoCo, located.
 
 Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots ...]
 [learner.num_envs=32 learner.rollout_steps=64 ...]``
@@ -23,8 +27,14 @@ Usage: ``python bench/train_throughput.py [--steps 30000] [--quality] [--robots 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import dataclasses
+import functools
 import glob
+import pstats
+import re
+from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -51,6 +61,8 @@ def main() -> None:
     parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. learner.num_envs=32")
     parser.add_argument("--quality", action="store_true", help="also evaluate success rate")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--profile", action="store_true",
+                        help="also profile each training and print the time per library")
     parser.add_argument("--curves", type=Path, default=None,
                         help="folder for every run's learning curve (CSV) and curves.png")
     args = parser.parse_args()
@@ -95,9 +107,53 @@ def main() -> None:
                 args.curves.mkdir(parents=True, exist_ok=True)
                 result.curve.to_csv(args.curves / f"{Path(path).stem}-{arena}.csv", index=False)
             print(" | ".join(f"{c}: {v}" for c, v in zip(columns, row, strict=True)), flush=True)
+            if args.profile:
+                again = functools.partial(train, robot, physics=physics, env=env,
+                                          config=config, budget=args.steps, seed=args.seed)
+                Console(width=200).print(profile_by_library(
+                    again, f"{Path(path).stem}, {arena}: profiled time by library"))
     Console(width=200).print(table)
     if args.curves is not None:
         print(plot_curves(args.curves))
+
+
+LIBRARIES = ("mujoco", "torchrl", "tensordict", "torch", "numpy")
+"""Libraries the profile names; everything else is evo or the rest of Python."""
+
+
+def library_of(filename: str, function: str) -> str:
+    """The library a profiled function belongs to, from its file (or, for a built-in,
+    its qualified name)."""
+    where = filename if filename != "~" else function
+    for library in LIBRARIES:
+        if re.search(rf"(site-packages/|\b){library}[/._]", where):
+            return library
+    if "/evo/" in filename:
+        return "evo"
+    return "python"
+
+
+def profile_by_library(run: Callable[[], object], title: str, top: int = 3) -> Table:
+    """Run ``run`` under cProfile; a table of each library's share of the time spent in
+    its own functions, with its ``top`` costliest functions."""
+    profile = cProfile.Profile()
+    profile.runcall(run)
+    own: dict[str, float] = defaultdict(float)
+    functions: dict[str, list[tuple[float, str]]] = defaultdict(list)
+    for (filename, line, function), row in pstats.Stats(profile).stats.items():  # type: ignore[attr-defined]
+        library, seconds = library_of(filename, function), row[2]
+        own[library] += seconds
+        functions[library].append((seconds, f"{Path(filename).name}:{line}({function})"
+                                   if filename != "~" else function))
+    total = sum(own.values())
+    table = Table(title=title)
+    for column in ("library", "share", "seconds", "costliest functions (own time)"):
+        table.add_column(column, justify="left" if column.startswith(("lib", "cost")) else "right")
+    for library, seconds in sorted(own.items(), key=lambda kv: -kv[1]):
+        costly = sorted(functions[library], reverse=True)[:top]
+        table.add_row(library, f"{seconds / total:.0%}", f"{seconds:.2f}",
+                      "; ".join(f"{name} {t:.2f}s" for t, name in costly))
+    return table
 
 
 def trained_with(arena: str, overrides: list[str]) -> TrainingParts:
