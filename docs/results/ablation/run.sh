@@ -1,29 +1,31 @@
 #!/usr/bin/env bash
-# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0, 1, 2) as four chains
-# side by side, one per method and one core's worth each (executor=serial), each chain
-# running its seeds in turn. Resumable: rerun it to continue every unfinished run.
+# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0, 1, 2): every
+# unfinished run at once, one process each (executor=serial), sharing the machine's
+# cores, so that all seeds grow together and a report over each run's first N robots
+# (--first N) can be made before the end. Resumable: rerun it to continue every
+# unfinished run. SEEDS="1 2" limits it to some seeds.
 #   docs/results/ablation/run.sh                  # from the repository root
-#   python -m analysis.report runs/ablation --out docs/results/ablation
+#   python -m analysis.report runs/ablation --out docs/results/ablation [--first 60]
 set -u
 cd "$(dirname "$0")/../../.."
 py=${PYTHON:-.venv/bin/python}
-chain() {
-  local structure=$1 learner=$2 name=$3
-  for seed in 0 1 2; do
-    dir=runs/ablation/${name}_seed$seed
-    if grep -qs '"complete": true' "$dir/summary.json"; then continue; fi
-    if [ -f "$dir/state.json" ]; then
-      args=("resume=$dir")
-    else
-      args=(+exp=ablation hydra.mode=RUN ga.structure="$structure" learner="$learner"
-            seed=$seed executor=serial "hydra.run.dir=$dir")
-    fi
-    MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/ablation_${name}.log" 2>&1 || return
-  done
+one() {
+  local structure=$1 learner=$2 name=$3 seed=$4
+  local dir=runs/ablation/${name}_seed$seed
+  if grep -qs '"complete": true' "$dir/summary.json"; then return; fi
+  if [ -f "$dir/state.json" ]; then
+    args=("resume=$dir")
+  else
+    args=(+exp=ablation hydra.mode=RUN ga.structure="$structure" learner="$learner"
+          seed="$seed" executor=serial "hydra.run.dir=$dir")
+  fi
+  MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/ablation_${name}_seed$seed.log" 2>&1
 }
 mkdir -p runs
-for spec in "E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"; do
-  # shellcheck disable=SC2086
-  chain $spec &
+for seed in ${SEEDS:-0 1 2}; do
+  for spec in "E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"; do
+    # shellcheck disable=SC2086
+    one $spec "$seed" &
+  done
 done
 wait
