@@ -296,3 +296,18 @@ def test_the_run_without_the_rule_is_read_at_the_env_steps_the_run_with_it_spent
     assert (row["pop_max"], evaluated) == (0.3, 3)
     row, evaluated = at_env_steps(trace, "a", 5)
     assert (row["pop_max"], evaluated) == (0.1, 1), "before its first robot: the first"
+
+
+def test_the_paired_runs_part_where_their_robots_first_differ() -> None:
+    from analysis.equal_cost import parting_table
+    from analysis.load import Runs
+
+    def runs(names: list[str], status: list[str]) -> Runs:
+        robots = pd.DataFrame(dict(seed=0, birth=range(len(names)), name=names,
+                                   status=status))
+        return Runs(robots, pd.DataFrame(), pd.DataFrame())
+
+    without = runs(["a", "b", "c", "d"], ["trained"] * 4)
+    with_ = runs(["a", "b", "x", "y"], ["trained", "stopped-early", "trained", "trained"])
+    (row,) = parting_table(without, with_).to_dict("records")
+    assert row == dict(seed=0, same_first_births=2, first_stop=1)

@@ -39,14 +39,20 @@ OTHER_SECTIONS: dict[str, tuple[str, str]] = {
 
 
 def defaulted_groups() -> set[str]:
-    """Config groups named in some defaults list (chosen with ``group=option``)."""
+    """Config groups named in some defaults list (chosen with ``group=option``); a group
+    file's entries are relative to its own group (``ga/``'s ``structure`` is
+    ``ga/structure``) unless they start with ``/``."""
     groups: set[str] = set()
     for path in CONF.rglob("*.yaml"):
         doc = OmegaConf.load(path)
         defaults = doc.get("defaults", []) if isinstance(doc, DictConfig) else []
+        here = path.parent.relative_to(CONF)
+        inside = "" if here.parts[:1] in ((), ("exp",)) else f"{here.as_posix()}/"
         for entry in defaults:
             if isinstance(entry, DictConfig):
-                groups.update(str(k).removeprefix("override ") for k in entry)
+                for key in entry:
+                    name = str(key).removeprefix("override ")
+                    groups.add(name[1:] if name.startswith("/") else f"{inside}{name}")
     return groups
 
 
