@@ -3,7 +3,7 @@
 # one run at a time with the default local executor (one worker per core). Resumable:
 # rerun it to continue every unfinished run.
 #   docs/results/early_rejection/run.sh          # from the repository root
-#   python -m analysis.early_rejection_compare runs/paper_clean runs/paper_clean_early \
+#   python -m analysis.equal_cost --without runs/paper_clean --with runs/paper_clean_early \
 #       --out docs/results/early_rejection
 set -u
 cd "$(dirname "$0")/../../.."
