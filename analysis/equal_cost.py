@@ -69,19 +69,18 @@ def cost_trace(runs: Runs) -> pd.DataFrame:
     return merged.drop(columns="budget")
 
 
-def run_table(runs: Runs, side: str) -> pd.DataFrame:
+def run_table(runs: Runs, side: str, trace: pd.DataFrame) -> pd.DataFrame:
     """One row per run: its seed, status and the figures of :data:`FIGURES`.
 
     Args:
         runs: The runs of one side.
         side: ``"without"`` or ``"with"``.
+        trace: :func:`cost_trace` of ``runs`` (its last row per run is the final
+            population).
     """
-    trace = cost_trace(runs)
     robots = runs.robots
     stopped = robots["status"] == STOPPED
     saved = (robots["scheduled_budget"] - robots["budget"]).clip(lower=0).where(stopped, 0)
-    finals = {run: final_population(rows, runs.population_sizes[str(run)])["fitness"]
-              for run, rows in robots.groupby("run")}
     rows = []
     for run in runs.runs.itertuples(index=False):
         last = trace[trace["run"] == run.run].iloc[-1]
@@ -91,8 +90,8 @@ def run_table(runs: Runs, side: str) -> pd.DataFrame:
             robots=int(mine.sum()), stopped_early=int((stopped & mine).sum()),
             env_steps=int(last["env_steps"]), env_steps_M=last["env_steps"] / 1e6,
             saved=int(saved[mine].sum()),
-            best=float(last["pop_max"]), pop_mean=float(finals[run.run].mean()),
-            pop_min=float(finals[run.run].min()),
+            best=float(last["pop_max"]), pop_mean=float(last["pop_mean"]),
+            pop_min=float(last["pop_min"]),
         ))
     return pd.DataFrame(rows)
 
@@ -105,10 +104,10 @@ def at_env_steps(trace: pd.DataFrame, run: str, env_steps: float) -> tuple[pd.Se
     return (within.iloc[-1], len(within)) if len(within) else (rows.iloc[0], 1)
 
 
-def equal_cost_table(without: Runs, per_run: pd.DataFrame) -> pd.DataFrame:
-    """Per seed of both sides: the run without the rule when it had spent what the run
-    with the rule spent in all, beside that run at its end."""
-    trace = cost_trace(without)
+def equal_cost_table(trace: pd.DataFrame, per_run: pd.DataFrame) -> pd.DataFrame:
+    """Per seed of both sides: the run without the rule (``trace``, its
+    :func:`cost_trace`) when it had spent what the run with the rule spent in all,
+    beside that run at its end."""
     rows = []
     for mine in per_run[per_run["side"] == "with"].itertuples(index=False):
         match = per_run[(per_run["side"] == "without") & (per_run["seed"] == mine.seed)]
@@ -222,17 +221,20 @@ def write_equal_cost(without_paths: Sequence[Path], with_paths: Sequence[Path],
     """Load both sides, write ``out/equal_cost.md`` with its figure and CSV, return it."""
     out = report_folder(out)
     sides = {"without": load_runs(without_paths), "with": load_runs(with_paths)}
-    per_run = pd.concat([run_table(runs, side) for side, runs in sides.items()],
+    traces = {side: cost_trace(runs) for side, runs in sides.items()}
+    per_run = pd.concat([run_table(runs, side, traces[side]) for side, runs in sides.items()],
                         ignore_index=True).sort_values(["seed", "side"], ignore_index=True)
     per_run.to_csv(out / "equal_cost_runs.csv", index=False)
     figure = out / "equal_cost.png"
-    plot_equal_cost({side: cost_trace(runs) for side, runs in sides.items()}, path=figure)
+    plot_equal_cost(traces, path=figure)
     report = out / REPORT
-    report.write_text(_markdown(sides, per_run, figure, out), encoding="utf-8")
+    report.write_text(_markdown(sides, traces["without"], per_run, figure, out),
+                      encoding="utf-8")
     return report
 
 
-def _markdown(sides: dict[str, Runs], per_run: pd.DataFrame, figure: Path, out: Path) -> str:
+def _markdown(sides: dict[str, Runs], trace_without: pd.DataFrame, per_run: pd.DataFrame,
+              figure: Path, out: Path) -> str:
     parts = [
         "# Early rejection at equal cost\n",
         "Runs without the rule against runs with it (`analysis.equal_cost`). Fitness is a "
@@ -241,7 +243,7 @@ def _markdown(sides: dict[str, Runs], per_run: pd.DataFrame, figure: Path, out: 
         "complete runs enter the comparisons.\n",
         "## Runs\n", markdown_table(per_run),
         *_comparison_markdown({side: complete_runs(runs) for side, runs in sides.items()},
-                              per_run[per_run["status"] == "complete"]),
+                              trace_without, per_run[per_run["status"] == "complete"]),
         figure_link(figure, out, "best fitness so far and population mean against env steps"),
     ]
     notes = [n for runs in sides.values() for n in runs.notes]
@@ -250,7 +252,8 @@ def _markdown(sides: dict[str, Runs], per_run: pd.DataFrame, figure: Path, out: 
     return "\n".join(parts)
 
 
-def _comparison_markdown(sides: dict[str, Runs], done: pd.DataFrame) -> list[str]:
+def _comparison_markdown(sides: dict[str, Runs], trace_without: pd.DataFrame,
+                         done: pd.DataFrame) -> list[str]:
     """The comparison sections over complete runs, or why there are none yet."""
     if any(done["side"].eq(side).sum() == 0 for side in SIDES):
         return ["_No complete run on both sides yet: no comparison._\n"]
@@ -266,7 +269,7 @@ def _comparison_markdown(sides: dict[str, Runs], done: pd.DataFrame) -> list[str
         "The run without the rule when it had spent what the run with it spent in all "
         "(and the robots it had evaluated by then), beside the run with the rule at its "
         "end.\n",
-        markdown_table(equal_cost_table(sides["without"], done)),
+        markdown_table(equal_cost_table(trace_without, done)),
         "## Where the paired runs part\n",
         "`same_first_births`: births at which both runs evaluated the same robot before "
         "they first differ; `first_stop`: the first birth the rule stopped. Where the runs "
