@@ -32,9 +32,9 @@ import os
 import tempfile
 from pathlib import Path
 
-import numpy as np
 from IPython.display import Image, Markdown, display
 
+from analysis.bootstrap import Resampling
 from analysis.load import load_runs
 from analysis.report import ablation_figures, ablation_tables, tests_markdown
 
@@ -57,7 +57,7 @@ display(runs.runs.drop(columns="path"))
 # ## Fitness per method, with bootstrap CIs
 
 # %%
-tables = ablation_tables(runs.robots, np.random.default_rng(seed), n_resamples=resamples)
+tables = ablation_tables(runs.robots, Resampling.seeded(seed, resamples))
 for note in tables.notes:
     display(Markdown(f"- {note}"))
 display(tables.budgets, tables.main)

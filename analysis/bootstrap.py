@@ -2,7 +2,8 @@
 
 All intervals come from :func:`scipy.stats.bootstrap` (percentile method by default: it
 is defined for every statistic used here, including ``max``, where BCa degenerates on
-ties). Randomness is an explicit :class:`numpy.random.Generator`.
+ties). Randomness is an explicit :class:`numpy.random.Generator`, carried with the level
+and the resample count in one :class:`Resampling`.
 
 **Resampling unit (decision).** Robots of a random-structure method (``R+R``, ``R+L``)
 are independent draws, so a robot is the unit. Robots of one evolved run (``E+R``,
@@ -17,6 +18,7 @@ descriptive of that one run, not of the method.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -58,16 +60,39 @@ def resampling_units(rows: pd.DataFrame) -> NDArray[np.int64] | None:
     return labels
 
 
+@dataclass(frozen=True)
+class Resampling:
+    """How every confidence interval of a study is drawn.
+
+    One value passed down instead of a generator, a level and a count at every layer.
+    Intervals drawn one after another consume the generator in turn, so a study with
+    the same seed gives the same intervals.
+
+    Attributes:
+        rng: Source of the resampling randomness.
+        confidence: Two-sided confidence level.
+        n_resamples: Bootstrap resamples per interval.
+        method: ``"percentile"``, ``"basic"`` or ``"BCa"`` (:func:`scipy.stats.bootstrap`).
+    """
+
+    rng: np.random.Generator
+    confidence: float = 0.95
+    n_resamples: int = 2000
+    method: str = "percentile"
+
+    @classmethod
+    def seeded(cls, seed: int, n_resamples: int = 2000) -> Resampling:
+        """Resampling from a fresh generator seeded with ``seed``."""
+        return cls(np.random.default_rng(seed), n_resamples=n_resamples)
+
+
 def bootstrap_ci(
     samples: Sequence[ArrayLike],
     statistic: Statistic,
-    rng: np.random.Generator,
+    resampling: Resampling,
     *,
     units: Sequence[ArrayLike | None] | None = None,
     paired: bool = False,
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
-    method: str = "percentile",
 ) -> tuple[float, float]:
     """Confidence interval of ``statistic(*samples)``, resampling rows or whole clusters.
 
@@ -75,13 +100,10 @@ def bootstrap_ci(
         samples: One or more 1-D samples; with ``paired`` they have equal length and are
             resampled together (rows of one table).
         statistic: ``f(*samples, axis=-1)``; must accept ``axis`` and reduce along it.
-        rng: Source of the resampling randomness.
+        resampling: Randomness, level and resample count.
         units: Per sample, cluster labels (see :func:`resampling_units`) or None for
             "each observation is a unit"; with ``paired`` only ``units[0]`` is used.
         paired: Resample the samples' rows jointly (for correlations).
-        confidence: Two-sided confidence level.
-        n_resamples: Bootstrap resamples.
-        method: ``"percentile"``, ``"basic"`` or ``"BCa"`` (:func:`scipy.stats.bootstrap`).
 
     Returns:
         ``(low, high)``; ``(nan, nan)`` when a sample has fewer than two units.
@@ -95,7 +117,8 @@ def bootstrap_ci(
     if any(_n_units(a, u) < 2 for a, u in zip(arrays, labels, strict=False)):
         return (np.nan, np.nan)
     options: dict[str, Any] = dict(
-        n_resamples=n_resamples, confidence_level=confidence, method=method, rng=rng
+        n_resamples=resampling.n_resamples, confidence_level=resampling.confidence,
+        method=resampling.method, rng=resampling.rng,
     )
     if all(u is None for u in labels):
         res = scipy.stats.bootstrap(

@@ -31,10 +31,10 @@ import os
 import tempfile
 from pathlib import Path
 
-import numpy as np
 from IPython.display import Image, Markdown, display
 
 from analysis import early_slope as es
+from analysis.bootstrap import Resampling
 from analysis.early_slope_report import (
     REJECTION_COLUMNS,
     correlation_table,
@@ -57,9 +57,8 @@ resamples = int(os.environ.get("EVO_RESAMPLES", "2000"))  # per interval (--resa
 # %%
 runs = load_runs(runs_path.split(os.pathsep))
 retrained = load_retrained(retrained_path.split(os.pathsep)) if retrained_path else None
-study = early_slope_study(runs.robots, runs.curves, np.random.default_rng(seed),
-                          population_size=runs.population_sizes, retrained=retrained,
-                          n_resamples=resamples)
+study = early_slope_study(runs.robots, runs.curves, Resampling.seeded(seed, resamples),
+                          population_size=runs.population_sizes, retrained=retrained)
 for note in [*runs.notes, *study.notes]:
     display(Markdown(f"- {note}"))
 display(runs.runs.drop(columns="path"))

@@ -34,10 +34,11 @@ from matplotlib.figure import Figure
 
 from analysis import early_slope as es
 from analysis import plots
+from analysis.bootstrap import Resampling
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
-from analysis.report import parser, report_folder, run_report
+from analysis.report import parser, report_folder, resampling_of, run_report
 from analysis.tables import fully_trained, method_order
 
 REPORT = "early_slope.md"
@@ -102,7 +103,7 @@ def study_robots(robots: pd.DataFrame,
 def early_slope_study(
     robots: pd.DataFrame,
     curves: pd.DataFrame,
-    rng: np.random.Generator,
+    resampling: Resampling,
     *,
     methods: Sequence[str] | None = None,
     fractions: Sequence[float] = es.FRACTIONS,
@@ -111,14 +112,13 @@ def early_slope_study(
     share: float = 0.1,
     top_k: int | None = None,
     retrained: pd.DataFrame | None = None,
-    n_resamples: int = 2000,
 ) -> EarlySlopeStudy:
     """Run the early-slope analysis on loaded runs.
 
     Args:
         robots: Robots table.
         curves: Curves table.
-        rng: Bootstrap randomness.
+        resampling: How the intervals are drawn.
         methods: Methods to study; None for the learned ones (module docstring).
         fractions: Cuts, as fractions of each robot's budget.
         population_size: Initial population size, one for all runs or per run id.
@@ -127,7 +127,6 @@ def early_slope_study(
         top_k: Size of the top whose losses the rejection counts; None for the top
             ``share`` of the robots studied.
         retrained: :func:`analysis.load.load_retrained`, or None.
-        n_resamples: Bootstrap resamples per interval.
 
     Returns:
         The study's tables.
@@ -146,12 +145,12 @@ def early_slope_study(
                      "(no episode completed early); they count as missing predictions.")
     preds = pd.concat([es.predictions(table, target) for target in es.TARGETS],
                       ignore_index=True)
-    metrics = es.rank_metrics(preds, rng, share=share, n_resamples=n_resamples)
+    metrics = es.rank_metrics(preds, resampling, share=share)
     k = top_k or max(1, int(np.ceil(share * len(chosen))))
     fitness_preds = preds[preds["target"] == "fitness"]
     rejection = es.rejection_tradeoff(fitness_preds, quantile=quantile, top_k=k)
     population = es.rejection_tradeoff(fitness_preds, threshold_column="threshold", top_k=k)
-    ceiling, note = (noise_ceiling_of(chosen, retrained, rng, n_resamples=n_resamples)
+    ceiling, note = (noise_ceiling_of(chosen, retrained, resampling)
                      if retrained is not None else
                      (None, "Noise ceiling: absent (no retrained structures given; "
                             "--retrained DIR...)."))
@@ -173,10 +172,8 @@ def _early_table(chosen: pd.DataFrame, curves: pd.DataFrame, fractions: Sequence
     ], ignore_index=True)
 
 
-def noise_ceiling_of(
-    robots: pd.DataFrame, retrained: pd.DataFrame, rng: np.random.Generator, *,
-    n_resamples: int = 2000,
-) -> tuple[pd.Series | None, str]:
+def noise_ceiling_of(robots: pd.DataFrame, retrained: pd.DataFrame, resampling: Resampling
+                     ) -> tuple[pd.Series | None, str]:
     """The noise ceiling from retrained structures and their first training in the runs.
 
     A structure's evaluation in the runs counts as one more training seed
@@ -195,7 +192,7 @@ def noise_ceiling_of(
         .assign(train_seed="original"),
     ], ignore_index=True)
     try:
-        ceiling = noise_ceiling(rows, rng, n_resamples=n_resamples)
+        ceiling = noise_ceiling(rows, resampling)
     except ValueError as err:
         return None, f"Noise ceiling: not computed ({err})."
     return ceiling, (f"Noise ceiling from {int(ceiling['n_structures'])} structures trained "
@@ -324,8 +321,7 @@ def write_early_slope_report(
     retrained: Sequence[str | Path] | None = None,
     methods: Sequence[str] | None = None,
     fractions: Sequence[float] = es.FRACTIONS,
-    seed: int = 0,
-    n_resamples: int = 2000,
+    resampling: Resampling | None = None,
     first: int | None = None,
 ) -> Path:
     """Load runs, run the study, draw its figures and write ``out/early_slope.md``.
@@ -336,8 +332,7 @@ def write_early_slope_report(
         retrained: Directories of retrained structures, or None.
         methods: Methods to study; None for the learned ones.
         fractions: Cuts, as fractions of each robot's budget.
-        seed: Seed of the bootstrap randomness.
-        n_resamples: Bootstrap resamples per interval.
+        resampling: How the intervals are drawn; None for seed 0 and 2000 resamples.
         first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
@@ -350,8 +345,8 @@ def write_early_slope_report(
             f"{', '.join(map(str, paths))}: no robot with a fitness of the methods "
             f"{', '.join(methods) if methods else 'R+L, E+L'} to study")
     study = early_slope_study(
-        runs.robots, runs.curves, np.random.default_rng(seed), methods=methods,
-        fractions=fractions, population_size=runs.population_sizes, n_resamples=n_resamples,
+        runs.robots, runs.curves, resampling or Resampling.seeded(0), methods=methods,
+        fractions=fractions, population_size=runs.population_sizes,
         retrained=None if not retrained else load_retrained(retrained))
     figures = early_slope_figures(study, out)
     report = out / REPORT
@@ -382,5 +377,4 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     return run_report(lambda: write_early_slope_report(
         args.runs, args.out, retrained=args.retrained, methods=args.methods,
-        fractions=args.fractions, seed=args.seed, n_resamples=args.resamples,
-        first=args.first))
+        fractions=args.fractions, resampling=resampling_of(args), first=args.first))

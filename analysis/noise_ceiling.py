@@ -56,7 +56,7 @@ import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 from omegaconf import DictConfig, OmegaConf
 
-from analysis.bootstrap import bootstrap_ci
+from analysis.bootstrap import Resampling, bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
@@ -131,28 +131,24 @@ def _clears(k: int) -> Callable[..., Any]:
 
 def noise_ceiling(
     trainings: pd.DataFrame,
-    rng: np.random.Generator,
+    resampling: Resampling,
     *,
     structure: str = "structure",
     seed: str = "train_seed",
     value: str = "fitness",
     baseline: pd.Series | None = None,
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
 ) -> pd.Series:
     """Seed-to-seed agreement of the fitness of the same structures (module docstring).
 
     Args:
         trainings: One row per (structure, training seed) with its ``value``; a
             structure trained under only some seeds is left out.
-        rng: Resampling randomness (structures are the resampled unit).
+        resampling: How the intervals are drawn (structures are the resampled unit).
         structure: Column naming the structure.
         seed: Column naming the training seed (or replicate).
         value: Fitness column.
         baseline: The random learner's fitness per structure (indexed by structure),
             or None: then ``clears_baseline`` is NaN.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples per interval.
 
     Returns:
         Every metric of :data:`METRICS` with ``<metric>_low`` and ``<metric>_high``,
@@ -174,27 +170,25 @@ def noise_ceiling(
     }
     out: dict[str, float] = {}
     for name, statistic in statistics.items():
-        out.update(_with_ci(name, columns, statistic, rng, confidence, n_resamples))
+        out.update(_with_ci(name, columns, statistic, resampling))
     base = None if baseline is None else baseline.reindex(wide.index).to_numpy(dtype=float)
     if base is None or not np.isfinite(base).all():
         out.update(clears_baseline=np.nan, clears_baseline_low=np.nan,
                    clears_baseline_high=np.nan)
     else:
-        out.update(_with_ci("clears_baseline", [*columns, base], _clears(k), rng, confidence,
-                            n_resamples))
+        out.update(_with_ci("clears_baseline", [*columns, base], _clears(k), resampling))
     return pd.Series(dict(**out, n_structures=len(wide), n_seeds=k))
 
 
 def _with_ci(name: str, columns: list[NDArray[np.float64]], statistic: Callable[..., Any],
-             rng: np.random.Generator, confidence: float, n_resamples: int) -> dict[str, float]:
+             resampling: Resampling) -> dict[str, float]:
     if len(columns[0]) < 3:
         return {name: np.nan, f"{name}_low": np.nan, f"{name}_high": np.nan}
     with warnings.catch_warnings():  # constant resamples: the statistic is NaN there
         warnings.simplefilter("ignore", scipy.stats.ConstantInputWarning)
         warnings.simplefilter("ignore", scipy.stats.DegenerateDataWarning)
         estimate = float(statistic(*columns))
-        low, high = bootstrap_ci(columns, statistic, rng, paired=True, confidence=confidence,
-                                 n_resamples=n_resamples)
+        low, high = bootstrap_ci(columns, statistic, resampling, paired=True)
     return {name: estimate, f"{name}_low": low, f"{name}_high": high}
 
 
@@ -216,8 +210,7 @@ def late_fitness(curve: pd.DataFrame, budget: float) -> float:
     return float(np.average(late["train/mean_return"], weights=late["train/episodes"]))
 
 
-def ceiling_table(trainings: pd.DataFrame, rng: np.random.Generator, *,
-                  n_resamples: int = 2000) -> pd.DataFrame:
+def ceiling_table(trainings: pd.DataFrame, resampling: Resampling) -> pd.DataFrame:
     """Every estimator's noise ceiling from a ``trainings.csv`` table.
 
     The ``seed`` trainings give the seeds; the ``baseline`` trainings (the random
@@ -233,8 +226,8 @@ def ceiling_table(trainings: pd.DataFrame, rng: np.random.Generator, *,
     rows = []
     for estimator in ESTIMATORS:
         baseline = base.groupby("structure")[estimator].mean() if len(base) else None
-        ceiling = noise_ceiling(seeds, rng, seed="replicate", value=estimator,
-                                baseline=baseline, n_resamples=n_resamples)
+        ceiling = noise_ceiling(seeds, resampling, seed="replicate", value=estimator,
+                                baseline=baseline)
         rows.append(dict(estimator=estimator, **ceiling))
     return pd.DataFrame(rows)
 
@@ -496,12 +489,12 @@ def _write_progress(out: Path, seconds: float) -> None:
 
 
 def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
-                 wall_seconds: float, command: str, seed: int = 0,
-                 n_resamples: int = 2000) -> Path:
+                 wall_seconds: float, command: str, resampling: Resampling | None = None
+                 ) -> Path:
     """``noise_ceiling.md``, ``.csv``, ``.png`` and ``summary.json`` from the trainings."""
     from analysis.plots import plot_seed_scatter
 
-    table = ceiling_table(trainings, np.random.default_rng(seed), n_resamples=n_resamples)
+    table = ceiling_table(trainings, resampling or Resampling.seeded(0))
     table.to_csv(out / "noise_ceiling.csv", index=False)
     seeds, base = _by_role(trainings)
     plot_seed_scatter(seeds, base, estimators=list(ESTIMATORS), ceiling=table,
@@ -621,7 +614,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               "run the same command again", file=sys.stderr)
         return 1
     report = write_report(args.out, trainings, settings, wall_seconds=wall_seconds(args.out),
-                          command=command, n_resamples=args.resamples)
+                          command=command, resampling=Resampling.seeded(0, args.resamples))
     print(f"report: {report}")
     return 0
 

@@ -37,6 +37,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis import plots, stats
+from analysis.bootstrap import Resampling
 from analysis.load import RunDirectoryError, Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
 from analysis.tables import METHODS, fully_trained, method_order
@@ -104,22 +105,14 @@ def _input_notes(robots: pd.DataFrame, scored: pd.DataFrame,
     return notes, left_out
 
 
-def ablation_tables(
-    robots: pd.DataFrame,
-    rng: np.random.Generator,
-    *,
-    k: int = 5,
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
-) -> AblationTables:
+def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5
+                    ) -> AblationTables:
     """Summaries, tests, contrasts and the paper's numbers for a robots table.
 
     Args:
         robots: Robots table (any subset of the four methods).
-        rng: Bootstrap randomness.
+        resampling: How the intervals are drawn.
         k: ``k`` of the top-k mean.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples per interval.
 
     Returns:
         The tables; what cannot be computed is None and explained in ``notes``.
@@ -133,8 +126,7 @@ def ablation_tables(
     present = method_order(scored["method"])
     missing = [m for m in METHODS if m not in present]
     notes, left_out = _input_notes(robots, scored, missing)
-    summary = stats.summarize(scored, rng, k=k, confidence=confidence,
-                              n_resamples=n_resamples)
+    summary = stats.summarize(scored, resampling, k=k)
     kruskal, pairwise = _tests(scored, None, notes)
     per_run = None
     runs_per_method = scored.groupby("method")["run"].nunique()
@@ -145,8 +137,7 @@ def ablation_tables(
                      "per method; the tests below compare robots.")
     interaction = None
     if not missing:
-        interaction = stats.interaction_contrast(scored, rng, confidence=confidence,
-                                                 n_resamples=n_resamples)
+        interaction = stats.interaction_contrast(scored, resampling)
     else:
         notes.append("The interaction contrast needs all four methods; not computed.")
     return AblationTables(
@@ -371,8 +362,7 @@ def write_report(
     paths: Sequence[str | Path],
     out: str | Path,
     *,
-    seed: int = 0,
-    n_resamples: int = 2000,
+    resampling: Resampling | None = None,
     first: int | None = None,
 ) -> Path:
     """Load runs, compute the tables, draw the figures and write ``out/report.md``.
@@ -380,8 +370,7 @@ def write_report(
     Args:
         paths: Run directories or folders holding them.
         out: Report folder (created).
-        seed: Seed of the bootstrap randomness.
-        n_resamples: Bootstrap resamples per interval.
+        resampling: How the intervals are drawn; None for seed 0 and 2000 resamples.
         first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
@@ -392,8 +381,7 @@ def write_report(
     if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
         raise RunDirectoryError(
             f"{', '.join(map(str, paths))}: no robot with a fitness (no evaluation finished)")
-    tables = ablation_tables(runs.robots, np.random.default_rng(seed),
-                             n_resamples=n_resamples)
+    tables = ablation_tables(runs.robots, resampling or Resampling.seeded(0))
     figures = ablation_figures(runs.robots, runs.curves, out,
                                population_size=runs.population_size)
     written = {stem: out / f"{stem}.png" for stem in figures}
@@ -436,6 +424,11 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
     return cli
 
 
+def resampling_of(args: argparse.Namespace) -> Resampling:
+    """The resampling a :func:`parser` command line asks for (``--seed``, ``--resamples``)."""
+    return Resampling.seeded(args.seed, args.resamples)
+
+
 def _positive(text: str) -> int:
     """An argparse type: an integer >= 1."""
     value = int(text)
@@ -466,8 +459,8 @@ def run_report(write: Callable[[], Path]) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
     args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
-    return run_report(lambda: write_report(args.runs, args.out, seed=args.seed,
-                                           n_resamples=args.resamples, first=args.first))
+    return run_report(lambda: write_report(args.runs, args.out, resampling=resampling_of(args),
+                                           first=args.first))
 
 
 if __name__ == "__main__":

@@ -41,7 +41,7 @@ import pandas as pd
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.bootstrap import Statistic, bootstrap_ci, resampling_units
+from analysis.bootstrap import Resampling, Statistic, bootstrap_ci, resampling_units
 from analysis.tables import method_order, require_columns
 
 # ---------------------------------------------------------------- point statistics
@@ -93,23 +93,15 @@ def summary_statistics(k: int = 5) -> dict[str, Statistic]:
 
 
 def summarize(
-    robots: pd.DataFrame,
-    rng: np.random.Generator,
-    *,
-    value: str = "fitness",
-    k: int = 5,
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
+    robots: pd.DataFrame, resampling: Resampling, *, value: str = "fitness", k: int = 5
 ) -> pd.DataFrame:
     """Per method and statistic: the estimate and its bootstrap CI.
 
     Args:
         robots: Robots table.
-        rng: Resampling randomness.
+        resampling: How the intervals are drawn.
         value: Column to summarise.
         k: ``k`` of the top-k mean.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples per interval.
 
     Returns:
         Long table with columns ``method``, ``statistic``, ``estimate``, ``ci_low``,
@@ -123,9 +115,7 @@ def summarize(
         x = group[value].to_numpy(dtype=float)
         units = resampling_units(group)
         for name, stat in summary_statistics(k).items():
-            low, high = bootstrap_ci(
-                [x], stat, rng, units=[units], confidence=confidence, n_resamples=n_resamples
-            )
+            low, high = bootstrap_ci([x], stat, resampling, units=[units])
             min_n = 2 if name == "std" else 1
             estimate = float(stat(x, axis=-1)) if len(x) >= min_n else np.nan
             rows.append(
@@ -283,11 +273,9 @@ def pairwise_mann_whitney(
 def mean_contrast(
     robots: pd.DataFrame,
     weights: Mapping[str, float],
-    rng: np.random.Generator,
+    resampling: Resampling,
     *,
     value: str = "fitness",
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
 ) -> tuple[float, float, float]:
     """A weighted sum of method means, ``Σ w_m mean_m``, with a bootstrap CI.
 
@@ -296,10 +284,8 @@ def mean_contrast(
     Args:
         robots: Robots table.
         weights: Method → weight; every method named must be in the table.
-        rng: Resampling randomness.
+        resampling: How the interval is drawn.
         value: Column to compare.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples.
 
     Returns:
         ``(estimate, ci_low, ci_high)``.
@@ -318,8 +304,7 @@ def mean_contrast(
 
     samples = [g[value].to_numpy(dtype=float) for g in groups.values()]
     units = [resampling_units(g) for g in groups.values()]
-    low, high = bootstrap_ci(samples, contrast, rng, units=units, confidence=confidence,
-                             n_resamples=n_resamples)
+    low, high = bootstrap_ci(samples, contrast, resampling, units=units)
     return float(contrast(*samples)), low, high
 
 
@@ -331,12 +316,7 @@ INTERACTION_CONTRASTS: dict[str, dict[str, float]] = {
 
 
 def interaction_contrast(
-    robots: pd.DataFrame,
-    rng: np.random.Generator,
-    *,
-    value: str = "fitness",
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
+    robots: pd.DataFrame, resampling: Resampling, *, value: str = "fitness"
 ) -> pd.DataFrame:
     """Effect of evolution on mean fitness without and with learning, and their difference.
 
@@ -345,17 +325,14 @@ def interaction_contrast(
 
     Args:
         robots: Robots table with all four methods.
-        rng: Resampling randomness.
+        resampling: How the intervals are drawn.
         value: Column to compare.
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples.
 
     Returns:
         Rows ``contrast``, ``estimate``, ``ci_low``, ``ci_high``.
     """
     rows = [
-        (name, *mean_contrast(robots, weights, rng, value=value, confidence=confidence,
-                              n_resamples=n_resamples))
+        (name, *mean_contrast(robots, weights, resampling, value=value))
         for name, weights in INTERACTION_CONTRASTS.items()
     ]
     return pd.DataFrame(rows, columns=["contrast", "estimate", "ci_low", "ci_high"])

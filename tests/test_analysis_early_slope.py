@@ -8,6 +8,7 @@ import pytest
 import scipy.stats
 
 from analysis import early_slope as es
+from analysis.bootstrap import Resampling
 from analysis.synthetic import synthetic_curves, synthetic_robots, with_curve_fitness
 
 
@@ -77,7 +78,7 @@ def test_known_ranking_gives_rho_one_at_late_cuts() -> None:
     robots, curves = learning_runs(rng, start=0.0, final=final, rate=3.0)
     table = es.early_table(robots, curves, fractions=(0.5, 0.75), population_size=5)
     assert len(table) == 60 and table["value"].notna().all()
-    metrics = es.rank_metrics(es.predictions(table, "fitness"), rng, n_resamples=200)
+    metrics = es.rank_metrics(es.predictions(table, "fitness"), Resampling(rng, n_resamples=200))
     for fraction in (0.5, 0.75):
         for predictor in ("value", "area", "curve"):
             row = metric(metrics, predictor, fraction, "spearman")
@@ -91,7 +92,7 @@ def test_pure_noise_curves_carry_no_rank_information() -> None:
     rng = np.random.default_rng(1)
     robots, curves = learning_runs(rng, n_robots=60, start=0.0, final=0.0, noise=1.0)
     table = es.early_table(robots, curves, fractions=(0.3,), population_size=5)
-    metrics = es.rank_metrics(es.predictions(table, "after_cut"), rng, n_resamples=500)
+    metrics = es.rank_metrics(es.predictions(table, "after_cut"), Resampling(rng, n_resamples=500))
     for name in ("spearman", "kendall"):
         row = metric(metrics, "value", 0.3, name)
         assert abs(row["estimate"]) < 0.3, row
@@ -106,7 +107,7 @@ def test_slope_catches_late_risers_the_value_misses() -> None:
                                    start=rng.normal(size=n), final=rng.normal(0, 4, size=n),
                                    rate=1.0, noise=0.02)
     table = es.early_table(robots, curves, fractions=(0.2,), population_size=5)
-    metrics = es.rank_metrics(es.predictions(table, "after_cut"), rng, n_resamples=200)
+    metrics = es.rank_metrics(es.predictions(table, "after_cut"), Resampling(rng, n_resamples=200))
     value = metric(metrics, "value", 0.2, "spearman")["estimate"]
     combined = metric(metrics, "value+slope", 0.2, "spearman")
     assert combined["estimate"] > value + 0.1, (combined["estimate"], value)

@@ -22,6 +22,7 @@ import pandas as pd
 import pytest
 from nbclient import NotebookClient
 
+from analysis.bootstrap import Resampling
 from analysis.early_slope_report import write_early_slope_report
 from analysis.load import RunDirectoryError, load_runs
 from analysis.report import ablation_tables, write_report
@@ -179,7 +180,8 @@ def test_report_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path
 
 
 def test_report_lists_missing_methods_instead_of_failing(ablation: Path, tmp_path: Path) -> None:
-    report = write_report([ablation / "1", ablation / "3"], tmp_path, n_resamples=100)
+    report = write_report([ablation / "1", ablation / "3"], tmp_path,
+                          resampling=Resampling.seeded(0, 100))
     text = report.read_text()
     assert "Missing: R+R, E+R." in text
     assert "| R+R | 0 | 0 | missing |" in text and "| E+R | 0 | 0 | missing |" in text
@@ -196,7 +198,7 @@ def test_with_three_seeds_per_method_runs_are_the_unit_and_per_run_means_are_tes
     means = {"R+R": -0.8, "R+L": -0.5, "E+R": -0.7, "E+L": 0.5}
     robots = synthetic_robots(rng, means=means, seeds=(0, 1, 2), n_robots=12,
                               population_size=4)
-    tables = ablation_tables(robots, rng, n_resamples=200)
+    tables = ablation_tables(robots, Resampling(rng, n_resamples=200))
     units = tables.main.set_index("method")["unit"]
     assert units.to_dict() == {"R+R": "robot", "R+L": "robot", "E+R": "run", "E+L": "run"}
     assert tables.per_run is not None and len(tables.per_run[1]) == 6
@@ -248,7 +250,8 @@ def test_early_slope_noise_ceiling_from_retrained_structures(
         (train / "summary.json").write_text(json.dumps(
             dict(robot=robot.name, seed=7, fitness=fitness, env_steps=int(robot.budget))))
     report = write_early_slope_report([ablation / "1", ablation / "3"], tmp_path / "out",
-                                      retrained=[tmp_path / "retrained"], n_resamples=100)
+                                      retrained=[tmp_path / "retrained"],
+                                      resampling=Resampling.seeded(0, 100))
     text = report.read_text()
     assert "Spearman ρ between trainings of the same structures" in text
     assert re.search(r"\(\d+ structures, 2 seeds\)", text)

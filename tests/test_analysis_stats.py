@@ -8,7 +8,7 @@ import pytest
 import scipy.stats
 
 from analysis import stats
-from analysis.bootstrap import bootstrap_ci, resampling_units
+from analysis.bootstrap import Resampling, bootstrap_ci, resampling_units
 from analysis.population import best_so_far, population_trace
 from analysis.synthetic import synthetic_robots
 from analysis.tables import require_columns
@@ -30,12 +30,16 @@ def test_top_k_mean_takes_the_largest_k() -> None:
 # ---------------------------------------------------------------- bootstrap
 
 
+def tight_90(seed: int) -> Resampling:
+    """A 90 % interval from enough resamples that its quantiles are the exact ones."""
+    return Resampling(np.random.default_rng(seed), confidence=0.90, n_resamples=20_000)
+
+
 def test_percentile_bootstrap_matches_hand_computed_quantiles() -> None:
     # Means of resamples of [0, 0, 1] are k/3 with k ~ Binomial(3, 1/3):
     # P(0) = 8/27, P(1/3) = 12/27, P(2/3) = 6/27, P(1) = 1/27, so the 5 % quantile is 0
     # and the 95 % one 2/3 (P(k <= 2) = 26/27 = 0.963 > 0.95).
-    low, high = bootstrap_ci([[0.0, 0.0, 1.0]], np.mean, np.random.default_rng(0),
-                             confidence=0.90, n_resamples=20_000)
+    low, high = bootstrap_ci([[0.0, 0.0, 1.0]], np.mean, tight_90(0))
     assert (low, high) == pytest.approx((0.0, 2 / 3))
 
 
@@ -43,13 +47,11 @@ def test_cluster_bootstrap_resamples_whole_clusters() -> None:
     x = np.repeat([0.0, 0.0, 1.0], 3)  # three clusters of three
     labels = np.repeat([0, 1, 2], 3)
     # Clusters as units: the same Binomial(3, 1/3)/3 as above -> (0, 2/3).
-    clustered = bootstrap_ci([x], np.mean, np.random.default_rng(1), units=[labels],
-                             confidence=0.90, n_resamples=20_000)
+    clustered = bootstrap_ci([x], np.mean, tight_90(1), units=[labels])
     assert clustered == pytest.approx((0.0, 2 / 3))
     # Robots as units: k/9 with k ~ Binomial(9, 1/3): P(k=0) = 0.026 < 0.05 <= P(k<=1),
     # P(k<=4) = 0.855 < 0.95 <= P(k<=5) = 0.958 -> (1/9, 5/9), a narrower interval.
-    robots = bootstrap_ci([x], np.mean, np.random.default_rng(1), confidence=0.90,
-                          n_resamples=20_000)
+    robots = bootstrap_ci([x], np.mean, tight_90(1))
     assert robots == pytest.approx((1 / 9, 5 / 9))
 
 
@@ -58,16 +60,15 @@ def test_cluster_bootstrap_handles_unequal_clusters() -> None:
     # gives the mean (3 - k) / (3 + k): 1, 1/2, 1/5, 0 with P = 8, 12, 6, 1 (/27).
     # P(0) = 0.037 < 0.05, so the 5 % quantile is 1/5; the 95 % one is 1.
     x = np.array([0.0, 0.0, 1.0, 1.0])
-    ci = bootstrap_ci([x], np.mean, np.random.default_rng(2), units=[[0, 0, 1, 2]],
-                      confidence=0.90, n_resamples=20_000)
+    ci = bootstrap_ci([x], np.mean, tight_90(2), units=[[0, 0, 1, 2]])
     assert ci == pytest.approx((0.2, 1.0))
     with pytest.raises(ValueError, match="unit labellings"):
-        bootstrap_ci([x, x], np.mean, np.random.default_rng(2), units=[None])
+        bootstrap_ci([x, x], np.mean, Resampling.seeded(2), units=[None])
 
 
 def test_bootstrap_needs_two_units() -> None:
-    assert np.isnan(bootstrap_ci([[1.0]], np.mean, np.random.default_rng(0))).all()
-    one_cluster = bootstrap_ci([[1.0, 2.0]], np.mean, np.random.default_rng(0), units=[[7, 7]])
+    assert np.isnan(bootstrap_ci([[1.0]], np.mean, Resampling.seeded(0))).all()
+    one_cluster = bootstrap_ci([[1.0, 2.0]], np.mean, Resampling.seeded(0), units=[[7, 7]])
     assert np.isnan(one_cluster).all()
 
 
@@ -94,7 +95,7 @@ def ablation() -> pd.DataFrame:
 
 
 def test_summary_reports_every_statistic_with_a_ci(ablation: pd.DataFrame) -> None:
-    summary = stats.summarize(ablation, np.random.default_rng(0), n_resamples=300)
+    summary = stats.summarize(ablation, Resampling.seeded(0, 300))
     assert list(summary["method"].unique()) == ["R+R", "R+L", "E+R", "E+L"]
     assert set(summary["statistic"]) == {"max", "top5_mean", "mean", "median", "iqm", "std"}
     assert (summary["n"] == 60).all() and (summary["n_seeds"] == 3).all()
@@ -112,7 +113,7 @@ def test_summary_reports_every_statistic_with_a_ci(ablation: pd.DataFrame) -> No
 
 
 def test_compare_with_paper_lists_the_reported_numbers(ablation: pd.DataFrame) -> None:
-    summary = stats.summarize(ablation, np.random.default_rng(0), n_resamples=200)
+    summary = stats.summarize(ablation, Resampling.seeded(0, 200))
     table = stats.compare_with_paper(summary)
     assert len(table) == 8
     paper = table.set_index(["method", "statistic"])["paper"]
@@ -180,7 +181,8 @@ def test_interaction_contrast_recovers_planted_means() -> None:
     rng = np.random.default_rng(5)
     means = {"R+R": 0.0, "R+L": 1.0, "E+R": 0.0, "E+L": 3.0}  # interaction = 2
     robots = synthetic_robots(rng, means=means, seeds=(0, 1, 2, 3), n_robots=25, sd=0.3)
-    table = stats.interaction_contrast(robots, rng, n_resamples=500).set_index("contrast")
+    table = stats.interaction_contrast(robots, Resampling(rng, n_resamples=500))
+    table = table.set_index("contrast")
     row = table.loc["interaction (E+L − R+L) − (E+R − R+R)"]
     group_means = robots.groupby("method")["fitness"].mean()
     expected = (group_means["E+L"] - group_means["R+L"]) - (group_means["E+R"]
@@ -194,7 +196,7 @@ def test_interaction_contrast_recovers_planted_means() -> None:
 def test_contrast_names_a_missing_method() -> None:
     robots = synthetic_robots(np.random.default_rng(0), means={"R+R": 0.0}, n_robots=5)
     with pytest.raises(ValueError, match="no rows for method"):
-        stats.interaction_contrast(robots, np.random.default_rng(0))
+        stats.interaction_contrast(robots, Resampling.seeded(0))
 
 
 # ---------------------------------------------------------------- population replay

@@ -228,6 +228,7 @@ def test_off_by_default_every_paper_config_gives_the_history_of_before(
 def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_so(
     early_reference: Path,
 ) -> None:
+    from analysis.bootstrap import Resampling
     from analysis.early_slope_report import study_robots
     from analysis.load import load_runs
     from analysis.report import ablation_tables
@@ -235,7 +236,7 @@ def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_s
     robots = load_runs([early_reference]).robots
     stopped = robots[robots["status"] == "stopped-early"]
     assert len(stopped) >= 2 and stopped["predicted"].notna().all()
-    tables = ablation_tables(robots, np.random.default_rng(0), n_resamples=50)
+    tables = ablation_tables(robots, Resampling.seeded(0, 50))
     assert any(f"{len(stopped)} robot(s) stopped early" in note for note in tables.notes)
     assert (tables.summary["n"] == len(robots) - len(stopped)).all(), tables.summary
     chosen, _, note = study_robots(robots)

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from analysis import noise_ceiling as nc
+from analysis.bootstrap import Resampling
 from analysis.noise_study import main as study_main
 from evo.robot import load_robot, parse_robot, save_robot
 
@@ -27,17 +28,17 @@ def test_noise_ceiling_of_identical_and_of_independent_retraining() -> None:
     train_seed = np.tile([0, 1, 2], 40)
     quality = np.repeat(rng.normal(size=40), 3)
     same = pd.DataFrame(dict(structure=structure, train_seed=train_seed, fitness=quality))
-    ceiling = nc.noise_ceiling(same, rng, n_resamples=200)
+    ceiling = nc.noise_ceiling(same, Resampling(rng, n_resamples=200))
     assert ceiling["spearman"] == pytest.approx(1.0) and ceiling["n_seeds"] == 3
     assert ceiling["kendall"] == pytest.approx(1.0) and ceiling["icc"] == pytest.approx(1.0)
     assert ceiling["top_quarter"] == pytest.approx(1.0)
     assert np.isnan(ceiling["clears_baseline"]), "no baseline given"
     independent = same.assign(fitness=rng.normal(size=len(same)))
-    ceiling = nc.noise_ceiling(independent, rng, n_resamples=500)
+    ceiling = nc.noise_ceiling(independent, Resampling(rng, n_resamples=500))
     assert ceiling["spearman_low"] < 0 < ceiling["spearman_high"]
     assert ceiling["icc_low"] < 0 < ceiling["icc_high"] and ceiling["n_structures"] == 40
     with pytest.raises(ValueError, match="train_seed"):
-        nc.noise_ceiling(same[same["train_seed"] == 0], rng)
+        nc.noise_ceiling(same[same["train_seed"] == 0], Resampling(rng))
 
 
 def test_icc_is_the_share_of_variance_between_structures() -> None:
@@ -56,8 +57,7 @@ def test_top_quarter_and_baseline_shares_on_a_small_case() -> None:
     rows = pd.DataFrame(dict(structure=np.tile(np.arange(8), 2), train_seed=np.repeat([0, 1], 8),
                              fitness=np.concatenate([a, b])))
     baseline = pd.Series(np.full(8, 4.0), index=np.arange(8))  # means 4.5 ... 4.5, 7, 6, ...
-    ceiling = nc.noise_ceiling(rows, np.random.default_rng(0), baseline=baseline,
-                               n_resamples=200)
+    ceiling = nc.noise_ceiling(rows, Resampling.seeded(0, 200), baseline=baseline)
     means = (a + b) / 2
     assert ceiling["clears_baseline"] == pytest.approx(np.mean(means > 4.0))
 

@@ -58,7 +58,7 @@ import scipy.optimize
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.bootstrap import Statistic, bootstrap_ci, resampling_units
+from analysis.bootstrap import Resampling, Statistic, bootstrap_ci, resampling_units
 from analysis.population import population_trace
 from analysis.tables import CURVE_COLUMNS, require_columns
 from evo.early_rejection import (  # noqa: F401 - the predictors, shared with the GA
@@ -304,22 +304,14 @@ def top_recall(prediction: ArrayLike, actual: ArrayLike, share: float = 0.1,
     return (on_top(p) & on_top(a)).sum(axis=-1) / k
 
 
-def rank_metrics(
-    preds: pd.DataFrame,
-    rng: np.random.Generator,
-    *,
-    share: float = 0.1,
-    confidence: float = 0.95,
-    n_resamples: int = 2000,
-) -> pd.DataFrame:
+def rank_metrics(preds: pd.DataFrame, resampling: Resampling, *, share: float = 0.1
+                 ) -> pd.DataFrame:
     """Spearman ρ, Kendall τ and top-``share`` recall of every predictor at every cut.
 
     Args:
         preds: Output of :func:`predictions` (possibly several targets concatenated).
-        rng: Resampling randomness.
+        resampling: How the intervals are drawn.
         share: Top share for the recall (0.1: top 10 %).
-        confidence: Two-sided CI level.
-        n_resamples: Bootstrap resamples per interval.
 
     Returns:
         Long table ``target``, ``fraction``, ``predictor``, ``metric``, ``estimate``,
@@ -338,8 +330,7 @@ def rank_metrics(
             too_few = len(ok) < 3
             estimate = np.nan if too_few else float(metric(*pair))
             low, high = (np.nan, np.nan) if too_few else bootstrap_ci(
-                pair, metric, rng, units=[units], paired=True, confidence=confidence,
-                n_resamples=n_resamples)
+                pair, metric, resampling, units=[units], paired=True)
             rows.append(dict(target=target, fraction=fraction, predictor=predictor,
                              metric=name, estimate=estimate, ci_low=low, ci_high=high,
                              n=len(ok)))
