@@ -118,7 +118,8 @@ def test_every_group_option_builds_an_evolution(
         assert parts.job.env.name == option
         assert (parts.job.env.arena.n_rocks > 0) is (option == "cluttered")
     if group == "ga":
-        assert isinstance(parts.strategy, Evolve) and isinstance(parts.strategy.selection, Roulette)
+        assert isinstance(parts.strategy, Evolve)
+        assert isinstance(parts.strategy.ga.selection, Roulette)
     if group == "ga/structure":
         strategy = {"evolve": Evolve, "random": RandomStructures}[option]
         assert type(parts.strategy) is strategy

@@ -92,11 +92,12 @@ def make_evolution(
     on_result: Callable[[HistoryRow], None] | None = None,
     evaluate: Callable[[Candidate, Job], Outcome] = fake_evaluate,
 ) -> Evolution:
-    strategy = Evolve(Roulette()) if structure == "E" else RandomStructures()
+    ga = GAConfig(population, budget, selection=Roulette(), replacement=ReplaceWorst(),
+                  schedule=SCHEDULE)
     return Evolution(
         run_dir,
-        ga=GAConfig(population, budget, replacement=ReplaceWorst(), schedule=SCHEDULE),
-        strategy=strategy,
+        ga=ga,
+        strategy=Evolve(ga) if structure == "E" else RandomStructures(),
         job=Job(PhysicsParams(), EnvConfig(), LearnerConfig(), str(run_dir), f"{structure}+L"),
         executor=executor or SerialExecutor(),
         seed=seed,

@@ -27,6 +27,7 @@ from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
 from evo.components.ga import (
     BudgetSchedule,
     Evolve,
+    GAConfig,
     Member,
     RandomStructures,
     ReplaceWorst,
@@ -220,6 +221,7 @@ def test_budget_schedule_edges() -> None:
 
 GENERATOR = GeneratorParams()
 LIMITS = Limits()
+FRESH = RandomStructures(GENERATOR, LIMITS)
 ROBOT = random_robot(np.random.default_rng(0), GENERATOR, LIMITS)
 
 
@@ -299,7 +301,7 @@ def population_of(seed: int, size: int = 6) -> list[Member]:
 @pytest.mark.parametrize("seed", range(12))
 def test_evolve_offspring_is_a_parent_with_one_subtree_of_the_other(seed: int) -> None:
     population = population_of(seed)
-    strategy = Evolve(Roulette(), GENERATOR, LIMITS)
+    strategy = Evolve(GAConfig(), FRESH)
     offspring = strategy.breed(population, np.random.default_rng(seed))
     assert offspring.operator == "crossover" and len(offspring.parents) == 2
     by_name = {m.name: m.robot for m in population}
@@ -328,7 +330,8 @@ def test_evolve_breeds_from_the_selected_parents() -> None:
     population = population_of(3)
     for i, j in [(0, 4), (5, 2), (1, 3)]:
         selection = Fixed(i, j)
-        strategy = Evolve(selection, GENERATOR, LIMITS)  # type: ignore[arg-type]
+        ga = GAConfig(selection=selection)  # type: ignore[arg-type]
+        strategy = Evolve(ga, FRESH)
         offspring = strategy.breed(population, np.random.default_rng(i * 10 + j))
         assert offspring.parents == (f"m{i}", f"m{j}")
         a, b = population[i].robot, population[j].robot
@@ -339,7 +342,7 @@ def test_evolve_uses_roulette_on_the_population_fitness() -> None:
     # Parent names over many breeding steps follow the pair law of Eq. 9.
     population = population_of(11, size=4)
     fitness = [m.fitness for m in population]
-    strategy = Evolve(Roulette(), GENERATOR, LIMITS)
+    strategy = Evolve(GAConfig(), FRESH)
     rng = np.random.default_rng(0)
     index = {m.name: i for i, m in enumerate(population)}
     pairs = Counter(
@@ -376,7 +379,7 @@ def test_evolve_gives_up_with_a_clear_error_on_parents_without_crossover_sites()
     )
     population = [Member("a", motor_only, 0.0), Member("b", motor_only, 1.0)]
     with pytest.raises(OperatorError, match="no valid offspring from 3 parent pairs"):
-        Evolve(Roulette(), GENERATOR, LIMITS, parent_tries=3).breed(
+        Evolve(GAConfig(parent_tries=3), FRESH).breed(
             population, np.random.default_rng(0)
         )
 

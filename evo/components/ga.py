@@ -176,53 +176,35 @@ class RandomStructures:
         return self.initial(rng)
 
 
-def check_mutation(rate: float, operators: Sequence[str]) -> None:
-    """Raise a readable error unless ``rate`` is a probability and every operator is known."""
-    if not 0 <= rate <= 1:
-        raise ValueError(f"mutation_rate must be in [0, 1], got {rate}")
-    unknown = set(operators) - set(MUTATIONS)
-    if unknown:
-        raise ValueError(
-            f"unknown mutation operators {sorted(unknown)}; expected some of {sorted(MUTATIONS)}"
-        )
-
-
 @dataclass(frozen=True, slots=True)
 class Evolve:
     """Structure strategy ``E``: crossover of two selected parents (paper section 6).
 
+    Its settings are the ``ga`` group's own (``selection``, ``crossover_tries``,
+    ``parent_tries``, ``mutation_rate``, ``mutation_operators``), read from ``ga``. The
+    initial population is random, from ``fresh``, whose generator and limits also
+    govern mutation.
+
     Attributes:
-        selection: How parents are chosen.
-        generator: Random generation (initial population, mutation's new subtrees).
-        limits: Size limits of valid robots.
-        crossover_tries: Swaps tried per parent pair before a new pair is drawn.
-        parent_tries: Parent pairs tried before giving up.
-        mutation_rate: Probability the offspring is also mutated (0 in the paper).
-        mutation_operators: Which mutation operators may be used.
+        ga: The GA config whose breeding settings apply.
+        fresh: Where the initial robots come from.
     """
 
-    selection: Roulette = field(default_factory=Roulette)
-    generator: GeneratorParams = field(default_factory=GeneratorParams)
-    limits: Limits = field(default_factory=Limits)
-    crossover_tries: int = 100
-    parent_tries: int = 20
-    mutation_rate: float = 0.0
-    mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
+    ga: GAConfig
+    fresh: RandomStructures = field(default_factory=RandomStructures)
     code: str = "E"
 
-    def __post_init__(self) -> None:
-        check_mutation(self.mutation_rate, self.mutation_operators)
-
     def initial(self, rng: np.random.Generator) -> Offspring:
-        return Offspring(random_robot(rng, self.generator, self.limits))
+        return self.fresh.initial(rng)
 
     def breed(self, population: Sequence[Member], rng: np.random.Generator) -> Offspring:
+        ga, limits = self.ga, self.fresh.limits
         fitness = [m.fitness for m in population]
-        for _ in range(self.parent_tries):
-            i, j = self.selection.select(fitness, rng)
+        for _ in range(ga.parent_tries):
+            i, j = ga.selection.select(fitness, rng)
             a, b = population[i], population[j]
             try:
-                result = crossover(a.robot, b.robot, rng, self.limits, self.crossover_tries)
+                result = crossover(a.robot, b.robot, rng, limits, ga.crossover_tries)
             except OperatorError:
                 continue
             # A swap of identical subtrees gives a parent back: not a new robot.
@@ -231,31 +213,21 @@ class Evolve:
                 continue
             child = novel[int(rng.integers(len(novel)))]
             operator = "crossover"
-            if self.mutation_rate and rng.random() < self.mutation_rate:
-                child = mutate(child, rng, self.mutation_operators, self.generator, self.limits)
+            if ga.mutation_rate and rng.random() < ga.mutation_rate:
+                child = mutate(child, rng, ga.mutation_operators, self.fresh.generator, limits)
                 operator = "crossover+mutation"
             return Offspring(child, (a.name, b.name), operator)
-        raise OperatorError(f"no valid offspring from {self.parent_tries} parent pairs")
+        raise OperatorError(f"no valid offspring from {ga.parent_tries} parent pairs")
 
 
 # ---- the ga config group ----------------------------------------------------------------
 
-def _random_structures(ga: GAConfig, generator: GeneratorParams,
-                       limits: Limits) -> StructureStrategy:
-    return RandomStructures(generator, limits)
-
-
-def _evolve(ga: GAConfig, generator: GeneratorParams, limits: Limits) -> StructureStrategy:
-    return Evolve(ga.selection, generator, limits, ga.crossover_tries, ga.parent_tries,
-                  ga.mutation_rate, ga.mutation_operators)
-
-
-STRUCTURES: dict[str, Callable[[GAConfig, GeneratorParams, Limits], StructureStrategy]] = {
-    "E": _evolve, "R": _random_structures,
+STRUCTURES: dict[str, Callable[[GAConfig, RandomStructures], StructureStrategy]] = {
+    "E": Evolve, "R": lambda ga, fresh: fresh,
 }
 """Structure strategies by code (``ga.structure``, the letter before ``+`` in a method
-name): each makes its strategy from the ``ga`` config, the generator and the limits.
-A new strategy is one entry here."""
+name): each makes its strategy from the ``ga`` config and the random structures of the
+``morphology`` group. A new strategy is one entry here."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -303,14 +275,19 @@ class GAConfig:
         if self.structure not in STRUCTURES:
             raise ValueError(f"structure: expected E (evolve) or R (random), got "
                              f"{self.structure!r}")
-        check_mutation(self.mutation_rate, self.mutation_operators)
+        if not 0 <= self.mutation_rate <= 1:
+            raise ValueError(f"mutation_rate must be in [0, 1], got {self.mutation_rate}")
+        unknown = set(self.mutation_operators) - set(MUTATIONS)
+        if unknown:
+            raise ValueError(f"unknown mutation operators {sorted(unknown)}; expected some of "
+                             f"{sorted(MUTATIONS)}")
 
     def strategy(self, generator: GeneratorParams | None = None,
                  limits: Limits | None = None) -> StructureStrategy:
         """The structure strategy ``structure`` names, making robots with ``generator``
         within ``limits`` (the ``morphology`` group; defaults when None)."""
-        return STRUCTURES[self.structure](self, generator or GeneratorParams(),
-                                          limits or Limits())
+        fresh = RandomStructures(generator or GeneratorParams(), limits or Limits())
+        return STRUCTURES[self.structure](self, fresh)
 
     def budgets(self) -> list[int]:
         """The training budget of every robot of the run, in birth order."""
