@@ -24,6 +24,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from evo.checks import at_least, positive
 from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
@@ -63,8 +64,7 @@ class Roulette:
     distinct: bool = True
 
     def __post_init__(self) -> None:
-        if self.epsilon <= 0:
-            raise ValueError(f"epsilon must be positive, got {self.epsilon}")
+        positive(self, "epsilon")
 
     def probabilities(self, fitness: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """Selection probability of every member (paper Eq. 9 on shifted fitness)."""
@@ -119,9 +119,7 @@ class BudgetSchedule:
     last: int = 250_000
 
     def __post_init__(self) -> None:
-        for key in ("initial", "first", "last"):
-            if getattr(self, key) < 1:
-                raise ValueError(f"{key} must be >= 1 env step, got {getattr(self, key)}")
+        at_least(self, 1, "initial", "first", "last", note=" env step")
         if self.last < self.first:
             raise ValueError(f"last ({self.last}) must be >= first ({self.first}): budgets "
                              "rise (or stay) over the offspring, as in the paper")
@@ -263,15 +261,13 @@ class GAConfig:
     early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
 
     def __post_init__(self) -> None:
-        if self.population_size < 2:
-            raise ValueError(f"population_size must be >= 2, got {self.population_size}")
+        at_least(self, 2, "population_size")
         if self.robot_budget < self.population_size:
             raise ValueError(
                 f"robot_budget ({self.robot_budget}) must be >= population_size "
                 f"({self.population_size})"
             )
-        if self.eval_timeout_s < 0:
-            raise ValueError(f"eval_timeout_s must be >= 0 (0 = none), got {self.eval_timeout_s}")
+        at_least(self, 0, "eval_timeout_s", note=" (0 = none)")
         if self.structure not in STRUCTURES:
             raise ValueError(f"structure: expected E (evolve) or R (random), got "
                              f"{self.structure!r}")

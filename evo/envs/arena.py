@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from evo.checks import at_least, positive
+
 SHAPES = ("box", "sphere", "cylinder", "ellipsoid")
 ROCK_DRAWS = 512
 """Draws a rock gets for a spot clear of the rocks placed before it."""
@@ -98,11 +100,8 @@ class ArenaParams:
     sleep: bool = False
 
     def __post_init__(self) -> None:
-        for key in ("side", "wall_height", "wall_thickness", "rock_density", "rock_spread"):
-            if getattr(self, key) <= 0:
-                raise ValueError(f"{key} must be positive, got {getattr(self, key)}")
-        if self.n_rocks < 0:
-            raise ValueError(f"n_rocks must be >= 0, got {self.n_rocks}")
+        positive(self, "side", "wall_height", "wall_thickness", "rock_density", "rock_spread")
+        at_least(self, 0, "n_rocks")
         if self.n_rocks and not self.rock_types:
             raise ValueError("rock_types must list at least one rock when n_rocks > 0")
         if self.start_clearance < 0 or self.target_clearance < 0:

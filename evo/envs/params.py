@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from evo.checks import at_least, positive
 from evo.envs.arena import ArenaParams
 from evo.robot.tree import Robot
 
@@ -39,12 +40,8 @@ class TaskParams:
     observe_up: bool = False
 
     def __post_init__(self) -> None:
-        if self.t_max < 1 or self.frame_skip < 1:
-            raise ValueError(
-                f"t_max and frame_skip must be >= 1, got {self.t_max}, {self.frame_skip}"
-            )
-        if self.success_radius <= 0:
-            raise ValueError(f"success_radius must be positive, got {self.success_radius}")
+        at_least(self, 1, "t_max", "frame_skip")
+        positive(self, "success_radius")
         if not 0 <= self.target_min <= self.target_max:
             raise ValueError(
                 f"need 0 <= target_min <= target_max, got {self.target_min}, {self.target_max}"
@@ -79,5 +76,4 @@ class EnvConfig:
     task: TaskParams = TaskParams()
 
     def __post_init__(self) -> None:
-        if self.nthread < 1:
-            raise ValueError(f"nthread must be >= 1, got {self.nthread}")
+        at_least(self, 1, "nthread")

@@ -21,6 +21,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
+from evo.checks import at_least
 from evo.envs.params import action_size
 from evo.robot.tree import Robot
 
@@ -72,10 +73,8 @@ class LearnerConfig:
     eval_episodes: int = 20
 
     def __post_init__(self) -> None:
-        positive = ("total_steps", "num_envs", "rollout_steps", "epochs", "minibatch_size")
-        for key in positive:
-            if getattr(self, key) < 1:
-                raise ValueError(f"{key} must be >= 1, got {getattr(self, key)}")
+        at_least(self, 1, "total_steps", "num_envs", "rollout_steps", "epochs",
+                 "minibatch_size")
         ranges = (("lr", self.lr > 0, "> 0"), ("gamma", 0 < self.gamma <= 1, "in (0, 1]"),
                   ("lmbda", 0 <= self.lmbda <= 1, "in [0, 1]"),
                   ("clip_epsilon", self.clip_epsilon > 0, "> 0"),
@@ -85,8 +84,7 @@ class LearnerConfig:
         for key, ok, expected in ranges:
             if not ok:
                 raise ValueError(f"{key} must be {expected}, got {getattr(self, key)}")
-        if self.eval_episodes < 0:
-            raise ValueError(f"eval_episodes must be >= 0, got {self.eval_episodes}")
+        at_least(self, 0, "eval_episodes")
         if not self.hidden or min(self.hidden) < 1:
             raise ValueError(f"hidden must list positive layer widths, got {self.hidden}")
 

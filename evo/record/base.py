@@ -21,6 +21,7 @@ from typing import Any, Protocol, Self, TypedDict, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
+from evo.checks import at_least
 from evo.episode import Episode
 from evo.interrupt import critical
 
@@ -113,11 +114,8 @@ class RecorderBase:
         self.flush_every = options.get("flush_every", 10)
         self.frame_stride = options.get("frame_stride", 1)
         self.still_tolerance = options.get("still_tolerance", STILL_TOLERANCE)
-        if self.flush_every < 1 or self.frame_stride < 1:
-            raise ValueError(f"flush_every and frame_stride must be >= 1, got "
-                             f"{self.flush_every} and {self.frame_stride}")
-        if self.still_tolerance < 0:
-            raise ValueError(f"still_tolerance must be >= 0, got {self.still_tolerance}")
+        at_least(self, 1, "flush_every", "frame_stride")
+        at_least(self, 0, "still_tolerance")
 
     def _frames(self, episode: Episode, clock_ns: int) -> Frames:
         """``episode`` checked against the recorder's model, strided (``frame_stride``),

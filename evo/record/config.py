@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from evo.checks import at_least
+
 if TYPE_CHECKING:
     import mujoco
 
@@ -32,8 +34,7 @@ class EpisodeChoice:
     every: int = 100
 
     def __post_init__(self) -> None:
-        if self.every < 0:
-            raise ValueError(f"every must be >= 0 (0 = off), got {self.every}")
+        at_least(self, 0, "every", note=" (0 = off)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,12 +59,8 @@ class RecordConfig:
     flush_every: int = 10
 
     def __post_init__(self) -> None:
-        if self.frame_stride < 1:
-            raise ValueError(f"frame_stride must be >= 1, got {self.frame_stride}")
-        if self.flush_every < 1:
-            raise ValueError(f"flush_every must be >= 1, got {self.flush_every}")
-        if self.still_tolerance < 0:
-            raise ValueError(f"still_tolerance must be >= 0, got {self.still_tolerance}")
+        at_least(self, 1, "frame_stride", "flush_every")
+        at_least(self, 0, "still_tolerance")
 
     @property
     def enabled(self) -> bool:

@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 
+from evo.checks import positive
 from evo.robot.tree import (
     FACE_NORMALS,
     IntMatrix,
@@ -120,19 +121,8 @@ class PhysicsParams:
                 f"wheel_radius must lie between module_size/2 ({half:.4f} m) and "
                 f"{top:.4f} m (wheels in diagonal cells would overlap), got {self.wheel_radius}"
             )
-        for key in (
-            "module_size",
-            "brain_mass",
-            "module_mass",
-            "wheel_mass",
-            "wheel_width",
-            "motor_max_speed",
-            "motor_max_torque",
-            "pivot_max_torque",
-            "timestep",
-        ):
-            if getattr(self, key) <= 0:
-                raise ValueError(f"{key} must be positive, got {getattr(self, key)}")
+        positive(self, "module_size", "brain_mass", "module_mass", "wheel_mass", "wheel_width",
+                 "motor_max_speed", "motor_max_torque", "pivot_max_torque", "timestep")
         if not 0 < self.pivot_range <= 90:
             raise ValueError(f"pivot_range must be in (0, 90] degrees, got {self.pivot_range}")
 
@@ -179,6 +169,11 @@ def floor_scene(root: ET.Element) -> None:
 
 def _fmt(values: npt.ArrayLike) -> str:
     return " ".join(f"{v:.6g}" for v in np.asarray(values, dtype=float).ravel())
+
+
+def _span(limit: float) -> str:
+    """A symmetric MJCF range, ``-limit limit``."""
+    return _fmt((-limit, limit))
 
 
 def _quat(frame: IntMatrix) -> str:
@@ -321,7 +316,7 @@ class _Builder:
             name=name,
             type="hinge",
             axis="0 0 1",
-            range=f"{-limit:.6g} {limit:.6g}",
+            range=_span(limit),
             armature=f"{p.pivot_armature:.6g}",
         )
         ET.SubElement(distal, "geom", name=f"{name}_distal", type="box", size=box,
@@ -350,28 +345,15 @@ class _Builder:
             # The pair turns together, as on one axle.
             first, second = self.wheel_joints[path]
             ET.SubElement(equality, "joint", joint1=first, joint2=second, polycoef="0 1 0 0 0")
-            ET.SubElement(
-                actuator,
-                "velocity",
-                name=name,
-                tendon=name,
-                kv=f"{p.motor_kv:.6g}",
-                ctrlrange=f"{-p.motor_max_speed:.6g} {p.motor_max_speed:.6g}",
-                forcerange=f"{-p.motor_max_torque:.6g} {p.motor_max_torque:.6g}",
-            )
+            ET.SubElement(actuator, "velocity", name=name, tendon=name, kv=_fmt(p.motor_kv),
+                          ctrlrange=_span(p.motor_max_speed),
+                          forcerange=_span(p.motor_max_torque))
             ET.SubElement(sensor, "tendonvel", name=f"{name}_speed", tendon=name)
         limit = math.radians(p.pivot_range)
         for name in self.pivots:
-            ET.SubElement(
-                actuator,
-                "position",
-                name=name,
-                joint=name,
-                kp=f"{p.pivot_kp:.6g}",
-                kv=f"{p.pivot_kd:.6g}",
-                ctrlrange=f"{-limit:.6g} {limit:.6g}",
-                forcerange=f"{-p.pivot_max_torque:.6g} {p.pivot_max_torque:.6g}",
-            )
+            ET.SubElement(actuator, "position", name=name, joint=name, kp=_fmt(p.pivot_kp),
+                          kv=_fmt(p.pivot_kd), ctrlrange=_span(limit),
+                          forcerange=_span(p.pivot_max_torque))
             ET.SubElement(sensor, "jointpos", name=f"{name}_angle", joint=name)
         for m in self.placed:
             name = self.names[m.path]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from evo.checks import at_least
 from evo.robot.tree import (
     BODY_TYPES,
     BUTTON_FACE,
@@ -59,8 +60,7 @@ class GeneratorParams:
     max_tries: int = 1000
 
     def __post_init__(self) -> None:
-        if self.max_depth < 1:
-            raise ValueError(f"max_depth must be >= 1, got {self.max_depth}")
+        at_least(self, 1, "max_depth")
         for key in ("p_empty", "p_passive_wheels"):
             value = getattr(self, key)
             if not 0.0 <= value <= 1.0:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 
+from evo.checks import at_least
 from evo.robot.tree import (
     BUTTON_FACE,
     DISTAL_FACE,
@@ -37,10 +38,8 @@ class Limits:
     max_modules: int = 40
 
     def __post_init__(self) -> None:
-        if self.max_depth < 1:
-            raise ValueError(f"max_depth must be >= 1, got {self.max_depth}")
-        if self.max_modules < 4:
-            raise ValueError(f"max_modules must be >= 4, got {self.max_modules}")
+        at_least(self, 1, "max_depth")
+        at_least(self, 4, "max_modules")
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,31 @@
+"""Range checks of dataclass fields, for ``__post_init__``.
+
+Each raises one ``ValueError`` that names the field, the bound and the value found
+(``"epochs must be >= 1, got 0"``); :func:`evo.config.typed` prefixes it with the
+config key, so a user sees ``learner: epochs must be >= 1, got 0``.
+"""
+
+from __future__ import annotations
+
+
+def at_least(obj: object, minimum: float, *names: str, note: str = "") -> None:
+    """Raise unless every field ``names`` of ``obj`` is ``>= minimum``.
+
+    Args:
+        obj: The object whose attributes are checked.
+        minimum: The smallest allowed value.
+        names: Attribute names, checked in order; the first one below names the error.
+        note: Said after the bound (``" env step"``, ``" (0 = off)"``).
+    """
+    for name in names:
+        value = getattr(obj, name)
+        if value < minimum:
+            raise ValueError(f"{name} must be >= {minimum:g}{note}, got {value}")
+
+
+def positive(obj: object, *names: str) -> None:
+    """Raise unless every field ``names`` of ``obj`` is ``> 0``."""
+    for name in names:
+        value = getattr(obj, name)
+        if value <= 0:
+            raise ValueError(f"{name} must be positive, got {value}")
