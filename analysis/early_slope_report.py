@@ -315,35 +315,33 @@ def _metric_ci(ceiling: pd.Series, metric: str) -> str:
 
 
 def write_early_slope_report(
-    paths: Sequence[str | Path],
+    runs: Runs,
     out: str | Path,
     *,
     retrained: Sequence[str | Path] | None = None,
     methods: Sequence[str] | None = None,
     fractions: Sequence[float] = es.FRACTIONS,
     resampling: Resampling | None = None,
-    first: int | None = None,
 ) -> Path:
-    """Load runs, run the study, draw its figures and write ``out/early_slope.md``.
+    """Run the study, draw its figures and write ``out/early_slope.md``.
 
     Args:
-        paths: Run directories or folders holding them.
+        runs: The runs, as :func:`analysis.load.load_runs` read them.
         out: Report folder (created).
         retrained: Directories of retrained structures, or None.
         methods: Methods to study; None for the learned ones.
         fractions: Cuts, as fractions of each robot's budget.
         resampling: How the intervals are drawn; None for seed 0 and 2000 resamples.
-        first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
-        The path of the Markdown report.
+        The path of the Markdown report (``rank_metrics.csv`` and ``rejection.csv``
+        beside it).
     """
-    out = report_folder(out)
-    runs = load_runs(paths, first)
     if study_robots(runs.robots, methods)[0].empty:
         raise RunDirectoryError(
-            f"{', '.join(map(str, paths))}: no robot with a fitness of the methods "
+            f"{runs.where}: no robot with a fitness of the methods "
             f"{', '.join(methods) if methods else 'R+L, E+L'} to study")
+    out = report_folder(out)
     study = early_slope_study(
         runs.robots, runs.curves, resampling or Resampling.seeded(0), methods=methods,
         fractions=fractions, population_size=runs.population_sizes,
@@ -376,5 +374,5 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"(exclusive); got {', '.join(f'{f:g}' for f in outside)}", file=sys.stderr)
         return 2
     return run_report(lambda: write_early_slope_report(
-        args.runs, args.out, retrained=args.retrained, methods=args.methods,
-        fractions=args.fractions, resampling=resampling_of(args), first=args.first))
+        load_runs(args.runs, args.first), args.out, retrained=args.retrained, methods=args.methods,
+        fractions=args.fractions, resampling=resampling_of(args)))

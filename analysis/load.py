@@ -99,6 +99,11 @@ class Runs:
     notes: list[str] = field(default_factory=list)
 
     @property
+    def where(self) -> str:
+        """The run directories, comma-separated (for messages)."""
+        return ", ".join(map(str, self.runs["path"]))
+
+    @property
     def population_size(self) -> int:
         """The initial population size shared by the runs (the largest, if they differ)."""
         return max(self.population_sizes.values(), default=DEFAULT_POPULATION)

@@ -358,29 +358,24 @@ def _caption(stem: str) -> str:
 # ---------------------------------------------------------------- CLI
 
 
-def write_report(
-    paths: Sequence[str | Path],
-    out: str | Path,
-    *,
-    resampling: Resampling | None = None,
-    first: int | None = None,
-) -> Path:
-    """Load runs, compute the tables, draw the figures and write ``out/report.md``.
+def write_report(runs: Runs, out: str | Path, *, resampling: Resampling | None = None
+                 ) -> Path:
+    """Compute the tables, draw the figures and write ``out/report.md``.
 
     Args:
-        paths: Run directories or folders holding them.
+        runs: The runs, as :func:`analysis.load.load_runs` read them.
         out: Report folder (created).
         resampling: How the intervals are drawn; None for seed 0 and 2000 resamples.
-        first: Only each run's first ``first`` robots (:func:`analysis.load.load_runs`).
 
     Returns:
         The path of the Markdown report.
+
+    Raises:
+        RunDirectoryError: If no robot of the runs has a fitness.
     """
-    out = report_folder(out)
-    runs = load_runs(paths, first)
     if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
-        raise RunDirectoryError(
-            f"{', '.join(map(str, paths))}: no robot with a fitness (no evaluation finished)")
+        raise RunDirectoryError(f"{runs.where}: no robot with a fitness (no evaluation finished)")
+    out = report_folder(out)
     tables = ablation_tables(runs.robots, resampling or Resampling.seeded(0))
     figures = ablation_figures(runs.robots, runs.curves, out,
                                population_size=runs.population_size)
@@ -441,8 +436,8 @@ def run_report(write: Callable[[], Path]) -> int:
     """A report CLI's ending: print the written report's path, or the user's mistake.
 
     Args:
-        write: Writes the report and returns its path; raises FileNotFoundError or
-            RunDirectoryError on a bad input.
+        write: Loads the runs, writes the report and returns its path; raises
+            FileNotFoundError or RunDirectoryError on a bad input.
 
     Returns:
         The exit status: 0, or 2 on a bad input (one ``error:`` line on stderr).
@@ -459,8 +454,8 @@ def run_report(write: Callable[[], Path]) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
     args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
-    return run_report(lambda: write_report(args.runs, args.out, resampling=resampling_of(args),
-                                           first=args.first))
+    return run_report(lambda: write_report(load_runs(args.runs, args.first), args.out,
+                                           resampling=resampling_of(args)))
 
 
 if __name__ == "__main__":

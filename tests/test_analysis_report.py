@@ -180,7 +180,7 @@ def test_report_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path
 
 
 def test_report_lists_missing_methods_instead_of_failing(ablation: Path, tmp_path: Path) -> None:
-    report = write_report([ablation / "1", ablation / "3"], tmp_path,
+    report = write_report(load_runs([ablation / "1", ablation / "3"]), tmp_path,
                           resampling=Resampling.seeded(0, 100))
     text = report.read_text()
     assert "Missing: R+R, E+R." in text
@@ -249,7 +249,7 @@ def test_early_slope_noise_ceiling_from_retrained_structures(
         fitness = robot.fitness + 1e-4 * rng.normal()
         (train / "summary.json").write_text(json.dumps(
             dict(robot=robot.name, seed=7, fitness=fitness, env_steps=int(robot.budget))))
-    report = write_early_slope_report([ablation / "1", ablation / "3"], tmp_path / "out",
+    report = write_early_slope_report(load_runs([ablation / "1", ablation / "3"]), tmp_path / "out",
                                       retrained=[tmp_path / "retrained"],
                                       resampling=Resampling.seeded(0, 100))
     text = report.read_text()
