@@ -84,8 +84,7 @@ def run_train(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     parts = training_parts(cfg)
     learner = parts.learner
     warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, parts.env)
-    train_robot(_robot(cfg), physics=parts.physics, env=parts.env, learner=learner,
-                seed=int(cfg.seed), out=out)
+    train_robot(_robot(cfg), parts, seed=int(cfg.seed), out=out)
 
 
 def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
@@ -98,15 +97,8 @@ def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         )
     parts = training_parts(cfg)
     try:
-        evaluate_robot(
-            _robot(cfg),
-            Path(str(cfg.checkpoint)),
-            physics=parts.physics,
-            env=parts.env,
-            episodes=parts.learner.eval_episodes,
-            seed=int(cfg.seed),
-            out=out,
-        )
+        evaluate_robot(_robot(cfg), Path(str(cfg.checkpoint)), parts, seed=int(cfg.seed),
+                       out=out)
     except ValueError as err:
         raise ConfigError(f"checkpoint: {err}") from None
 

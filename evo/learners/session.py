@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -24,6 +24,9 @@ from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
 from evo.rundir import write_json
+
+if TYPE_CHECKING:
+    from evo.edge import TrainingParts
 
 
 def _progress(console: Console) -> Progress:
@@ -38,21 +41,14 @@ def _progress(console: Console) -> Progress:
     )
 
 
-def train_robot(
-    robot: Robot,
-    *,
-    physics: PhysicsParams,
-    env: EnvConfig,
-    learner: LearnerConfig,
-    seed: int,
-    out: Path,
-    console: Console | None = None,
-) -> dict[str, Any]:
-    """Train ``robot`` for ``learner.total_steps``, evaluate it, write the run files.
+def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
+                console: Console | None = None) -> dict[str, Any]:
+    """Train ``robot`` for ``parts.learner.total_steps``, evaluate it, write the run files.
 
     Returns:
         The summary also written to ``out/summary.json``.
     """
+    physics, env, learner = parts.physics, parts.env, parts.learner
     console = console or Console()
     out.mkdir(parents=True, exist_ok=True)
     save_robot(robot, out / "robot.json")
@@ -125,18 +121,11 @@ def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
     return summary
 
 
-def evaluate_robot(
-    robot: Robot,
-    checkpoint: Path,
-    *,
-    physics: PhysicsParams,
-    env: EnvConfig,
-    episodes: int,
-    seed: int,
-    out: Path,
-    console: Console | None = None,
-) -> dict[str, Any]:
-    """Run the policy in ``checkpoint`` deterministically for ``episodes`` episodes."""
+def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingParts, *, seed: int,
+                   out: Path, console: Console | None = None) -> dict[str, Any]:
+    """Run the policy in ``checkpoint`` deterministically for the learner's
+    ``eval_episodes`` episodes."""
+    physics, env, episodes = parts.physics, parts.env, parts.learner.eval_episodes
     console = console or Console()
     policy = load_checkpoint(checkpoint, robot=robot, obs_size=observation_size(robot, env.task))
     evaluation = evaluate_policy(robot, policy, physics=physics, env=env, episodes=episodes,
