@@ -496,5 +496,14 @@ def test_ray_executor_gives_the_serial_fitness(
         assert outcome.error and math.isnan(outcome.fitness)
         with pytest.raises(ValueError, match="Expecting"):
             executor.submit(json.loads, "{").result(timeout=60)
+        # Early rejection through Ray: the minimum to beat travels with the candidate,
+        # and the worker stops where the serial evaluation stops.
+        from test_early_rejection import NEAR, RULE, TINY_LEARNER, real_candidate
+
+        early = Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path / "early"), early=RULE)
+        stopped = executor.submit(evaluate, real_candidate(5.0), early).result(timeout=600)
+        assert stopped.error is None and stopped.stopped_early and stopped.env_steps == 512
+        kept = executor.submit(evaluate, real_candidate(-10.0), early).result(timeout=600)
+        assert not kept.stopped_early and kept.env_steps >= 2560
     finally:
         ray.shutdown()
