@@ -82,7 +82,11 @@ def _update(
     config: LearnerConfig,
 ) -> dict[str, float]:
     """``epochs`` passes of shuffled minibatch PPO updates over ``batch``."""
-    flat = batch.reshape(-1)
+    # Only the keys the loss reads: indexing a minibatch then costs a handful of tensors,
+    # not the collector's thirty.
+    keys = loss.tensor_keys
+    flat = batch.select(*loss.in_keys, keys.advantage, keys.value_target, strict=False)
+    flat = flat.reshape(-1)
     sums: dict[str, float] = dict.fromkeys(_LOSS_KEYS, 0.0)
     count = 0
     for _ in range(config.epochs):
@@ -138,11 +142,13 @@ def _objective(
         critic_coeff=config.critic_coeff,
         loss_critic_type="l2",
         normalize_advantage=True,
+        functional=False,  # plain modules: the same numbers without per-call parameter swaps
     )
     gae = GAE(
         gamma=config.gamma, lmbda=config.lmbda, value_network=policy.critic, deactivate_vmap=True
     )
-    return loss, gae, torch.optim.Adam(loss.parameters(), lr=config.lr)
+    # foreach: one vectorised Adam step over all parameters, the same numbers as the loop.
+    return loss, gae, torch.optim.Adam(loss.parameters(), lr=config.lr, foreach=True)
 
 
 def _batch_row(batch: TensorDictBase, steps: int,
