@@ -449,7 +449,9 @@ def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
     for table_path in tables:
         trainings = pd.read_csv(table_path)
         for row in trainings[trainings["role"] == "seed"].itertuples(index=False):
-            rows.append(dict(structure=str(row.structure), train_seed=row.seed,
+            # The replicate, not the derived seed: replicate k of every structure is one
+            # column of the seed-to-seed comparison, as the tool itself pivots it.
+            rows.append(dict(structure=str(row.structure), train_seed=row.replicate,
                              fitness=float(row.fitness), budget=row.env_steps,
                              source=str(table_path.parent)))
     summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
@@ -481,7 +483,8 @@ def load_retrained(paths: PathsLike) -> pd.DataFrame:
     ``summary.json`` names the ``robot``, the ``seed`` and the ``fitness``), an
     evolution run whose robots were retrained (every history row counts, its ``seed``
     being the training seed) or a folder of ``python -m analysis.noise_ceiling`` (its
-    ``trainings.csv``: every seed training counts, the random learner's do not). A
+    ``trainings.csv``: every seed training counts, under its replicate number, the
+    random learner's do not). A
     structure is the robot name without a ``-<birth>`` suffix.
 
     Args:

@@ -187,12 +187,19 @@ def test_a_folder_of_other_settings_is_refused(
 def test_the_early_slope_study_reads_a_noise_ceiling_folder(
     ceiling_run: tuple[Path, dict[str, str]],
 ) -> None:
+    from analysis.bootstrap import Resampling
     from analysis.load import load_retrained
 
     out, _ = ceiling_run
     retrained = load_retrained([out])
-    assert len(retrained) == 8 and retrained["train_seed"].nunique() == 8
+    assert len(retrained) == 8 and sorted(retrained["train_seed"].unique()) == [0, 1]
     assert set(retrained["structure"]) == set(pd.read_csv(out / nc.TRAININGS)["structure"])
+    # The same numbers as the tool's own table: every structure under both replicates.
+    ceiling = nc.noise_ceiling(retrained, Resampling.seeded(0, 200))
+    written = pd.read_csv(out / "noise_ceiling.csv").set_index("estimator").loc["fitness"]
+    assert ceiling["n_structures"] == 4 and ceiling["n_seeds"] == 2
+    assert ceiling["spearman"] == pytest.approx(written["spearman"])
+    assert ceiling["icc"] == pytest.approx(written["icc"])
 
 
 def test_the_study_table_gathers_cells(
