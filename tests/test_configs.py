@@ -308,7 +308,7 @@ def fake_run_dir(path: Path, config: str = "seed: 0\n") -> Path:
 def test_main_stops_at_start_with_exit_2_naming_the_key(tmp_path: Path) -> None:
     # (command-line arguments, what stderr must say); all started at once. One of each
     # path to exit 2 (a section's check, the seed, a check across keys, resume):
-    # test_bad_values_name_their_key covers every message of the section checks.
+    # test_bad_values_name_their_key checks the section checks' messages in-process.
     cases: list[tuple[list[str], str]] = [
         (["ga.population_size=-3"], "ga: population_size must be >= 2, got -3"),
         (["seed=-1"], "seed: expected a non-negative integer, got -1"),
