@@ -1,14 +1,15 @@
 """The ceiling of PPO's end-to-end rate against raw physics: what PPO's own arithmetic
 costs per collector batch, measured beside the physics it must wait for.
 
-For one robot and one learner setting (by default the paper's: 12 arenas x 128 steps,
-4 epochs of minibatch 512, as ``+exp=paper_clean`` trains), this collects one real batch
+For one robot and the learner of ``+exp=paper_clean`` (the paper's 12 arenas x 128 steps,
+4 epochs of minibatch 512; Hydra overrides change it), this collects one real batch
 with the TorchRL collector and then times, in the same run:
 
 * **physics**: the raw rate of the same compiled model, arenas, threads and frame skip
   (``bench/env_throughput.py``'s ``raw_rate``), as seconds per batch;
 * **policy floor**: the actor's forward pass and sampling on each control step's
-  observations, in plain torch (no TensorDict, no collector);
+  observations, through ``GaussianSampler.sample`` (plain torch: no TensorDict, no
+  collector);
 * **update floor**: the epochs of minibatch steps in plain torch (the clipped objective,
   value loss, entropy bonus, backward pass, gradient clip, Adam step) on the same
   networks and sizes;
@@ -20,7 +21,7 @@ against raw physics that PPO could reach even if the environment, the collector 
 loss cost nothing beyond their arithmetic, on the same cores, one after the other.
 
 Usage: ``python bench/ppo_floor.py [--robot robots/four_wheeler.json] [--repeats 5]
-[learner.num_envs=12 learner.rollout_steps=128 ...]``
+[learner.num_envs=32 learner.rollout_steps=64 ...]``
 """
 
 from __future__ import annotations
@@ -43,12 +44,15 @@ from torchrl.collectors import Collector
 
 from evo.edge import compose_config, training_parts
 from evo.envs.reach import make_env
-from evo.learners.common import GaussianHead, LearnerConfig, ValueHead, make_policy
+from evo.learners.common import (
+    GaussianHead,
+    GaussianSampler,
+    LearnerConfig,
+    ValueHead,
+    make_policy,
+)
 from evo.learners.ppo import _objective, _update, torch_threads
 from evo.robot import load_robot
-
-PAPER = ["learner.num_envs=12", "learner.rollout_steps=128", "learner.minibatch_size=512"]
-"""The learner of ``+exp=paper_clean`` (on top of ``conf/learner/ppo.yaml``)."""
 
 
 def best_of(repeats: int, run: Callable[[], object]) -> float:
@@ -61,15 +65,11 @@ def best_of(repeats: int, run: Callable[[], object]) -> float:
     return min(times)
 
 
-def plain_policy(head: GaussianHead, observations: torch.Tensor) -> None:
-    """Every control step's actor forward pass and Gaussian sample, in plain torch."""
+def plain_policy(sampler: GaussianSampler, observations: torch.Tensor) -> None:
+    """Every control step's actor forward pass and Gaussian sample, on tensors."""
     with torch.no_grad():
         for obs in observations:
-            loc, scale = head(obs)
-            noise = torch.randn_like(loc)
-            action = loc + scale * noise
-            (-0.5 * noise**2 - scale.log()).sum(-1)
-            del action
+            sampler.sample(obs)
 
 
 def plain_update(head: GaussianHead, value: ValueHead, batch: TensorDictBase,
@@ -108,12 +108,12 @@ def main() -> None:
     parser.add_argument("--arena", default="clean")
     parser.add_argument("--nthread", type=int, default=2, help="physics threads")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats (best kept)")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides (default: the paper's)")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides, e.g. learner.num_envs=32")
     args = parser.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)
     parts = training_parts(compose_config(
-        ["+exp=train", f"env={args.arena}", *(args.overrides or PAPER)]))
+        ["+exp=paper_clean", f"env={args.arena}", *args.overrides]))
     config, physics = parts.learner, parts.physics
     env_config = dataclasses.replace(parts.env, nthread=args.nthread)
     robot = load_robot(args.robot)
@@ -133,10 +133,11 @@ def main() -> None:
     frames = config.frames_per_batch
     physics_s = frames / raw_rate(probe, 4 * config.rollout_steps, np.random.default_rng(0))
     head, value = copy.deepcopy(policy.head), copy.deepcopy(policy.critic.module)
+    sampler = GaussianSampler(head)
     by_step = batch["observation"].transpose(0, 1)  # control step, arena, observation
     with torch_threads(args.nthread):  # as the learner runs GAE and the update
         measured = {
-            "policy floor": best_of(args.repeats, lambda: plain_policy(head, by_step)),
+            "policy floor": best_of(args.repeats, lambda: plain_policy(sampler, by_step)),
             "update floor": best_of(args.repeats, lambda: plain_update(
                 head, value, batch, config)),
             "TorchRL GAE": best_of(args.repeats, lambda: gae(batch.clone())),
