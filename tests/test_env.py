@@ -184,6 +184,25 @@ def test_injected_nan_ends_only_that_arena_flagged() -> None:
     assert env.core.steps.tolist() == [1, 1, 0, 1]
 
 
+def test_a_thrown_robot_ends_unstable_and_earns_only_the_time_penalty() -> None:
+    """A contact blow-up can stay finite and throw the robot: up past ``max_height`` or
+    out over the walls, where the approach term would pay for the distance. Either ends
+    that arena's episode as unstable; driving about never does."""
+    core = ReachCore(robot(), num_envs=4, seed=0)
+    core.reset()
+    for _ in range(40):
+        assert not core.step(forward(core)).unstable.any()
+    brain = core.model.body("brain").jntadr[0]
+    qpos, qvel = core.model.jnt_qposadr[brain], core.model.jnt_dofadr[brain]
+    core.qvel[1, qvel + 2] = 40.0  # flung upwards: ~2 m within one control step
+    core.qpos[2, qpos] = core.arena.side / 2 + 1.0  # out over the wall
+    step = core.step(forward(core))
+    assert step.unstable.tolist() == [False, True, True, False]
+    assert step.truncated.tolist() == [False, True, True, False]
+    assert step.terms["approach"][1:3].tolist() == [0.0, 0.0]
+    assert np.allclose(step.reward[1:3], -1 / core.task.t_max)
+
+
 def test_traced_episodes_are_numbered_and_a_blown_up_one_is_flagged_and_not_recorded(
     tmp_path: Path,
 ) -> None:

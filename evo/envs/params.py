@@ -30,6 +30,10 @@ class TaskParams:
         target_min: Inner radius of the annulus the target is drawn from, m.
         target_max: Outer radius of that annulus, m.
         observe_up: Add gravity's direction in the brain frame to the observation.
+        max_height: A module centre higher than this, m, or beyond the walls' centre
+            lines means the physics threw the robot (a contact blow-up): that arena's
+            episode ends as unstable. Far outside the arena the approach term grows
+            with distance and would pay for being thrown.
     """
 
     t_max: int = 1000
@@ -38,10 +42,11 @@ class TaskParams:
     target_min: float = 0.5
     target_max: float = 1.5
     observe_up: bool = False
+    max_height: float = 1.0
 
     def __post_init__(self) -> None:
         at_least(self, 1, "t_max", "frame_skip")
-        positive(self, "success_radius")
+        positive(self, "success_radius", "max_height")
         if not 0 <= self.target_min <= self.target_max:
             raise ValueError(
                 f"need 0 <= target_min <= target_max, got {self.target_min}, {self.target_max}"

@@ -32,9 +32,10 @@ Reward per control step, as named terms (their sum is the reward):
 * ``success``: ``+1`` on the step where ``d < success_radius``, which also terminates.
 
 An episode is truncated after ``t_max`` control steps. A numerical blow-up (non-finite
-state, or MuJoCo resetting the arena after a bad acceleration, which shows as time
-jumping back) ends only that arena's episode: it is truncated, flagged ``unstable``, its
-observation is held at the last good one and its step earns only the time penalty.
+state, MuJoCo resetting the arena after a bad acceleration, which shows as time jumping
+back, or the robot thrown: a module above ``task.max_height`` or beyond the walls) ends
+only that arena's episode: it is truncated, flagged ``unstable``, its observation is
+held at the last good one and its step earns only the time penalty.
 """
 
 from __future__ import annotations
@@ -341,8 +342,18 @@ class ReachCore:
         unstable: Bools = failed | ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(
             self.qvel).all(axis=1) | ~np.isfinite(self.sensordata).all(axis=1)
         unstable |= np.abs(self.time - before - dt) > 0.5 * self.model.opt.timestep
-        unstable |= self._diverged()
+        unstable |= self._diverged() | self._thrown()
         return unstable
+
+    def _thrown(self) -> Bools:
+        """Arenas whose robot the physics threw: a module centre above
+        ``task.max_height`` or beyond the walls' centre lines. Neither can happen by
+        driving (the walls and rocks are lower than a module); a contact blow-up that
+        stays finite does it, and the approach term would pay for the flight."""
+        modules = self.sensordata[:, self.i_modules].reshape(self.num_envs, self.n_modules, 3)
+        outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
+        thrown: Bools = outside | (modules[:, :, 2] > self.task.max_height).any(axis=1)
+        return thrown
 
     def _diverged(self) -> Bools:
         """Arenas whose state MuJoCo found bad (NaN, Inf or huge qpos, qvel or qacc) and
