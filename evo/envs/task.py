@@ -352,8 +352,8 @@ class ReachCore:
         stays finite does it, and the approach term would pay for the flight."""
         modules = self.sensordata[:, self.i_modules].reshape(self.num_envs, self.n_modules, 3)
         outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
-        thrown: Bools = outside | (modules[:, :, 2] > self.task.max_height).any(axis=1)
-        return thrown
+        high = (modules[:, :, 2] > self.task.max_height).any(axis=1)
+        return np.asarray(outside | high, dtype=np.bool_)
 
     def _diverged(self) -> Bools:
         """Arenas whose state MuJoCo found bad (NaN, Inf or huge qpos, qvel or qacc) and
