@@ -87,12 +87,26 @@ def test_budget_is_respected_within_one_batch(ppo_run) -> None:  # noqa: ANN001
     ]
 
 
-def test_same_seed_same_curve_different_seed_different_curve() -> None:
-    config = dataclasses.replace(SMALL, num_envs=4, rollout_steps=32, epochs=2)
+def learner_of(overrides: list[str]) -> LearnerConfig:
+    """The learner ``python evo/main.py <overrides>`` trains with."""
+    from evo.edge import compose_config, training_parts
+
+    return training_parts(compose_config(overrides)).learner
+
+
+@pytest.mark.parametrize(
+    "overrides", [["+exp=train"], ["+exp=paper_clean"]], ids=["one-robot learner", "paper learner"]
+)
+def test_same_seed_same_curve_different_seed_different_curve(overrides: list[str]) -> None:
+    """At the one-robot learner's settings (``+exp=train``: 128 arenas x 16 steps) and the
+    paper's (12 x 128, minibatch 512), two batches each: the seed alone fixes the curve."""
+    config = learner_of(overrides)
+    budget = 2 * config.frames_per_batch
     runs = [
-        train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=config, budget=1024, seed=s)
+        train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=config, budget=budget, seed=s)
         for s in (5, 5, 6)
     ]
+    assert len(runs[0].curve) == 2
     pd.testing.assert_frame_equal(
         curve_without_time(runs[0].curve), curve_without_time(runs[1].curve)
     )
