@@ -347,9 +347,9 @@ class ReachCore:
 
     def _thrown(self) -> Bools:
         """Arenas whose robot the physics threw: a module centre above
-        ``task.max_height`` or beyond the walls' centre lines. Neither can happen by
-        driving (the walls and rocks are lower than a module); a contact blow-up that
-        stays finite does it, and the approach term would pay for the flight."""
+        ``task.max_height`` or beyond the walls' centre lines. Driving does not get
+        there (the walls stand twice a module's height); a contact blow-up that stays
+        finite does, and outside the arena the approach term would pay for the distance."""
         modules = self.sensordata[:, self.i_modules].reshape(self.num_envs, self.n_modules, 3)
         outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
         high = (modules[:, :, 2] > self.task.max_height).any(axis=1)
