@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 import torch
 
+from evo.edge import compose_config, training_parts
 from evo.envs.params import EnvConfig, TaskParams, observation_size
 from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, load_checkpoint, make_policy, save_checkpoint
@@ -89,8 +90,6 @@ def test_budget_is_respected_within_one_batch(ppo_run) -> None:  # noqa: ANN001
 
 def learner_of(overrides: list[str]) -> LearnerConfig:
     """The learner ``python evo/main.py <overrides>`` trains with."""
-    from evo.edge import compose_config, training_parts
-
     return training_parts(compose_config(overrides)).learner
 
 

@@ -350,10 +350,17 @@ class ReachCore:
         ``task.max_height`` or beyond the walls' centre lines. Driving does not get
         there (the walls stand twice a module's height); a contact blow-up that stays
         finite does, and outside the arena the approach term would pay for the distance."""
-        modules = self.sensordata[:, self.i_modules].reshape(self.num_envs, self.n_modules, 3)
+        modules = self._module_positions()
         outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
         high = (modules[:, :, 2] > self.task.max_height).any(axis=1)
         return np.asarray(outside | high, dtype=np.bool_)
+
+    def _module_positions(self) -> F64:
+        """World position of every module in every arena, (N, modules, 3), from the
+        current sensors."""
+        modules: F64 = self.sensordata[:, self.i_modules].reshape(
+            self.num_envs, self.n_modules, 3)
+        return modules
 
     def _diverged(self) -> Bools:
         """Arenas whose state MuJoCo found bad (NaN, Inf or huge qpos, qvel or qacc) and
@@ -375,7 +382,7 @@ class ReachCore:
     def _observe(self) -> tuple[npt.NDArray[np.float32], F64]:
         """Observation and task distance d of every arena from the current sensors."""
         s, n = self.sensordata, self.num_envs
-        modules = s[:, self.i_modules].reshape(n, self.n_modules, 3)
+        modules = self._module_positions()
         gap = self.target[:, None, :2] - modules[:, :, :2]
         distance = np.sqrt((gap**2).sum(axis=2)).min(axis=1)
         to_target = self.target[:, :2] - s[:, self.i_origin][:, :2]
