@@ -36,6 +36,7 @@ from IPython.display import Image, Markdown, display
 
 from analysis.bootstrap import Resampling
 from analysis.load import load_runs
+from analysis.nested_report import nested_markdown
 from analysis.report import ablation_figures, ablation_tables, tests_markdown
 
 # %% tags=["parameters"]
@@ -57,7 +58,8 @@ display(runs.runs.drop(columns="path"))
 # ## Fitness per method, with bootstrap CIs
 
 # %%
-tables = ablation_tables(runs.robots, Resampling.seeded(seed, resamples))
+tables = ablation_tables(runs.robots, Resampling.seeded(seed, resamples),
+                        population_size=runs.population_size)
 for note in tables.notes:
     display(Markdown(f"- {note}"))
 display(tables.budgets, tables.main)
@@ -76,6 +78,13 @@ if tables.per_run is not None:
 # %%
 display(tables.interaction if tables.interaction is not None
         else f"not computed; missing: {tables.missing}")
+
+# %% [markdown]
+# ## Runs as the unit: Welch's t on run means, the mixed model, the seeds needed
+
+# %%
+display(Markdown(nested_markdown(tables.nested)) if tables.nested is not None
+        else "not computed: needs two or more GA seeds per method")
 
 # %% [markdown]
 # ## Beside the paper (reward scales differ: compare the ordering, not the values)

@@ -1,6 +1,8 @@
 """The ablation report (paper §8): ``python -m analysis.report RUN... --out DIR``.
 
-Reads run directories (or a Hydra multirun folder, :mod:`analysis.load`) and writes
+Reads run directories (or a Hydra multirun folder, :mod:`analysis.load`; with
+``--history-only`` their committed ``history.csv`` and ``summary.json`` alone,
+:mod:`analysis.history_runs`, and no learning-curve figures) and writes
 ``DIR/report.md`` with its PNG figures beside it:
 
 * per method: n, max, top-5 mean, mean, median, IQM and std of fitness, each with a
@@ -9,6 +11,10 @@ Reads run directories (or a Hydra multirun folder, :mod:`analysis.load`) and wri
   Vargha–Delaney A12 (:mod:`analysis.stats`); with three or more GA seeds per method the
   same tests on per-run means;
 * the interaction contrast ``(E+L − R+L) − (E+R − R+R)`` and its two parts, with CIs;
+* with two or more GA seeds per method, the sections with the run as the unit
+  (:mod:`analysis.nested_report`): per question, Welch's t-test on run means and a mixed
+  model with a random intercept per run; per-run summaries; the GA seeds a run-level
+  test needs (:mod:`analysis.power`);
 * the paper's figures (:mod:`analysis.plots`): fitness per robot in birth order, each
   method against R+R (Figs. 13–15); every run's fitness over the evolution (Figs. 10,
   12); learning curves of selected robots (Figs. 9, 11); best fitness so far against
@@ -38,8 +44,15 @@ from matplotlib.figure import Figure
 
 from analysis import plots, stats
 from analysis.bootstrap import Resampling
+from analysis.history_runs import load_histories
 from analysis.load import RunDirectoryError, Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
+from analysis.nested_report import (
+    NestedTables,
+    nested_markdown,
+    nested_tables,
+    write_nested_tables,
+)
 from analysis.tables import METHODS, fully_trained, method_order
 
 REPORT = "report.md"
@@ -71,6 +84,8 @@ class AblationTables:
         paper: :func:`analysis.stats.compare_with_paper`.
         budgets: Per method: median, min and max env steps per robot.
         notes: Sentences on what was left out and why.
+        nested: The run-level sections (:mod:`analysis.nested_report`), or None with
+            fewer than two GA seeds per method.
     """
 
     present: list[str]
@@ -85,6 +100,7 @@ class AblationTables:
     paper: pd.DataFrame
     budgets: pd.DataFrame
     notes: list[str] = field(default_factory=list)
+    nested: NestedTables | None = None
 
 
 def _input_notes(robots: pd.DataFrame, scored: pd.DataFrame,
@@ -105,14 +121,16 @@ def _input_notes(robots: pd.DataFrame, scored: pd.DataFrame,
     return notes, left_out
 
 
-def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5
-                    ) -> AblationTables:
+def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5,
+                    population_size: int = 20) -> AblationTables:
     """Summaries, tests, contrasts and the paper's numbers for a robots table.
 
     Args:
         robots: Robots table (any subset of the four methods).
-        resampling: How the intervals are drawn.
+        resampling: How the intervals are drawn (its generator also drives the power
+            simulation, after every interval).
         k: ``k`` of the top-k mean.
+        population_size: Initial population size (for the final population's mean).
 
     Returns:
         The tables; what cannot be computed is None and explained in ``notes``.
@@ -140,11 +158,16 @@ def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5
         interaction = stats.interaction_contrast(scored, resampling)
     else:
         notes.append("The interaction contrast needs all four methods; not computed.")
+    nested = nested_tables(scored, population_size, resampling.rng)
+    if nested is None:
+        notes.append("Run-level statistics need two or more GA seeds per method; not "
+                     "computed.")
     return AblationTables(
         present=present, missing=missing, left_out=left_out, summary=summary,
         main=main_table(summary, missing), kruskal=kruskal, pairwise=pairwise,
         per_run=per_run, interaction=interaction,
         paper=stats.compare_with_paper(summary), budgets=budget_table(scored), notes=notes,
+        nested=nested,
     )
 
 
@@ -307,6 +330,8 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
             **{"estimate [CI]": [fmt_ci(r.estimate, r.ci_low, r.ci_high)
                                  for r in t.interaction.itertuples()]})
         parts.append(markdown_table(shown[["contrast", "estimate [CI]"]]))
+    if t.nested is not None:
+        parts.append(nested_markdown(t.nested))
     parts += ["\n## Beside the paper\n\n", PAPER_NOTE + "\n\n", _order_markdown(t.summary),
               "\n", markdown_table(t.paper)]
     parts.append("\n## Figures\n")
@@ -376,7 +401,8 @@ def write_report(runs: Runs, out: str | Path, *, resampling: Resampling | None =
     if not np.isfinite(runs.robots["fitness"].to_numpy(dtype=float)).any():
         raise RunDirectoryError(f"{runs.where}: no robot with a fitness (no evaluation finished)")
     out = report_folder(out)
-    tables = ablation_tables(runs.robots, resampling or Resampling.seeded(0))
+    tables = ablation_tables(runs.robots, resampling or Resampling.seeded(0),
+                             population_size=runs.population_size)
     figures = ablation_figures(runs.robots, runs.curves, out,
                                population_size=runs.population_size)
     written = {stem: out / f"{stem}.png" for stem in figures}
@@ -384,6 +410,8 @@ def write_report(runs: Runs, out: str | Path, *, resampling: Resampling | None =
     report.write_text(ablation_markdown(runs, tables, written, out), encoding="utf-8")
     tables.summary.to_csv(out / "summary.csv", index=False)
     tables.pairwise.to_csv(out / "pairwise.csv", index=False)
+    if tables.nested is not None:
+        write_nested_tables(tables.nested, out)
     return report
 
 
@@ -453,8 +481,13 @@ def run_report(write: Callable[[], Path]) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.report RUN... --out DIR``; exit 0, or 2 on a bad input."""
-    args = parser("Ablation report (paper section 8) of evo runs.").parse_args(argv)
-    return run_report(lambda: write_report(load_runs(args.runs, args.first), args.out,
+    cli = parser("Ablation report (paper section 8) of evo runs.")
+    cli.add_argument("--history-only", action="store_true",
+                     help="read only each run's history.csv and summary.json (committed "
+                          "copies; seed from a <method>_seed<S> name): no learning curves")
+    args = cli.parse_args(argv)
+    load = load_histories if args.history_only else load_runs
+    return run_report(lambda: write_report(load(args.runs, args.first), args.out,
                                            resampling=resampling_of(args)))
 
 
