@@ -144,8 +144,9 @@ def _decision(name: str, row: pd.Series) -> str:
 
 def nested_markdown(t: NestedTables) -> str:
     """The run-level sections as Markdown."""
-    parts = ["\n## Runs as the unit\n\n", UNIT_NOTE, *[f"- {n}\n" for n in t.notes],
-             "\n### Decision per question\n\n", markdown_table(decision_table(t)),
+    notes = "".join(f"- {n}\n" for n in t.notes) + ("\n" if t.notes else "")
+    parts = ["\n## Runs as the unit\n\n", UNIT_NOTE, notes,
+             "### Decision per question\n\n", markdown_table(decision_table(t)),
              "\n### Per method, runs as the unit\n\n",
              "Mean over runs of each run's summary, with a t interval over runs "
              "(`best`: the run's best robot; `final_population_mean`: the mean of its "
@@ -196,7 +197,6 @@ def power_sentence(table: pd.DataFrame) -> str:
         "then raised until a simulation of Welch's test (4,000 studies per candidate, "
         "normal run means, each method's own variance) reaches 80 % too (`seeds`): the "
         "methods' run-level spreads differ, which the closed form's pooled variance "
-        "ignores. More robots per run barely help: the run effect (`sd_between`) "
-        "dominates. The spreads come from three runs per method, so these numbers are "
-        "rough.\n\n"
+        "ignores. The spreads are estimated from the runs at hand, a few per method, so "
+        "these numbers are rough.\n\n"
     )
