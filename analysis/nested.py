@@ -29,6 +29,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -129,7 +130,10 @@ class Contrast:
     def from_t(cls, estimate: float, se: float, df: float, confidence: float = 0.95
                ) -> Contrast:
         """The test and interval of ``estimate`` with standard error ``se`` on ``df``."""
-        t = estimate / se if se > 0 else np.copysign(np.inf, estimate) if estimate else np.nan
+        if se > 0:
+            t = estimate / se
+        else:  # no spread: any difference is certain, none is undefined
+            t = float(np.copysign(np.inf, estimate)) if estimate else np.nan
         p = float(2 * scipy.stats.t.sf(abs(t), df))
         half = float(scipy.stats.t.ppf(0.5 + confidence / 2, df)) * se
         return cls(float(estimate), float(se), float(df), float(t), p,
@@ -198,14 +202,14 @@ def run_level_tests(
                                        "ci_high", "t", "df", "p", "p_holm", "reject"])
 
 
-def _with_holm(rows: list[dict[str, object]], alpha: float) -> list[dict[str, object]]:
+def _with_holm(rows: list[dict[str, Any]], alpha: float) -> list[dict[str, Any]]:
     """``p_holm`` over the pair rows (the interaction keeps its p) and ``reject``."""
     pairs = [r for r in rows if r["question"] != INTERACTION_NAME]
-    for row, adjusted in zip(pairs, holm([float(str(r["p"])) for r in pairs]), strict=True):
-        row["p_holm"] = adjusted
+    for row, adjusted in zip(pairs, holm([r["p"] for r in pairs]), strict=True):
+        row["p_holm"] = float(adjusted)
     for row in rows:
         row.setdefault("p_holm", row["p"])
-        row["reject"] = bool(float(str(row["p_holm"])) <= alpha)
+        row["reject"] = bool(row["p_holm"] <= alpha)
     return rows
 
 
