@@ -16,11 +16,16 @@ agrees.
 step tests at ``alpha / n_tests``; a pair that comes later is tested at a larger level,
 so planning at ``alpha / n_tests`` (Bonferroni) is the level that guarantees the power
 whatever the other pairs do.
+
+``python -m analysis.power RUN... [--first N] [--history-only]`` prints the seeds for
+the observed E+L − R+L difference of the runs given.
 """
 
 from __future__ import annotations
 
+import argparse
 import math
+import sys
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,7 +36,11 @@ import scipy.stats
 from statsmodels.stats.power import TTestIndPower
 from statsmodels.tools.sm_exceptions import ConvergenceWarning
 
+from analysis.history_runs import load_histories
+from analysis.load import RunDirectoryError, load_runs
+from analysis.markdown import markdown_table
 from analysis.nested import variance_components
+from analysis.tables import fully_trained
 
 MAX_SEEDS = 10_000
 """Seeds per method beyond which :func:`seeds_needed` gives up (returns this)."""
@@ -168,3 +177,44 @@ def power_table(robots: pd.DataFrame, pair: tuple[str, str] = ("E+L", "R+L"), *,
                 seeds=seeds_needed(delta, var_a, var_b, alpha=alpha, n_tests=n_tests,
                                    power=power, rng=rng)))
     return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------- CLI
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m analysis.power RUN... [--first N] [--history-only]``: print the seeds.
+
+    Returns:
+        The exit status: 0, or 2 on a bad input (one ``error:`` line on stderr).
+    """
+    cli = argparse.ArgumentParser(description="GA seeds per method a run-level test needs.")
+    cli.add_argument("runs", nargs="+", help="run directories, or folders holding them")
+    cli.add_argument("--first", type=int, default=None, help="only each run's first N robots")
+    cli.add_argument("--history-only", action="store_true",
+                     help="read only history.csv and summary.json (committed copies)")
+    cli.add_argument("--pair", nargs=2, default=["E+L", "R+L"], metavar=("A", "B"),
+                     help="the two methods whose observed difference is planned for")
+    cli.add_argument("--seed", type=int, default=0, help="seed of the power simulation")
+    args = cli.parse_args(argv)
+    try:
+        runs = (load_histories if args.history_only else load_runs)(args.runs, args.first)
+        robots = fully_trained(runs.robots)
+        missing = [m for m in args.pair if m not in set(robots["method"])]
+        if missing:
+            raise RunDirectoryError(f"{', '.join(args.runs)}: no robots of {missing}")
+    except (FileNotFoundError, RunDirectoryError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    table = power_table(robots, (args.pair[0], args.pair[1]),
+                        rng=np.random.default_rng(args.seed))
+    first = table.iloc[0]
+    print(f"{first['pair']} = {first['delta']:.3f}: {int(first['seeds'])} GA seeds per method "
+          f"at {int(first['robots_per_run'])} robots per run (80 % power, Welch on run means, "
+          f"alpha = 0.05 / 3 for Holm over three pairs)")
+    print(markdown_table(table), end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -205,6 +205,20 @@ def test_history_copy_without_a_seed_is_named(tmp_path: Path, capsys: pytest.Cap
     assert "best_run" in err and "seed<S>" in err and len(err.strip().splitlines()) == 1
 
 
+def test_power_cli_prints_the_seeds_for_the_observed_difference(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    robots = synthetic_robots(np.random.default_rng(10), means={"R+L": 0.0, "E+L": 0.5},
+                              seeds=(0, 1, 2), n_robots=6, sd=0.3, seed_sd=0.2)
+    write_copies(robots, tmp_path / "runs")
+    assert power.main([str(tmp_path / "runs"), "--history-only"]) == 0
+    headline, *table = capsys.readouterr().out.splitlines()
+    seeds = int(headline.split(": ")[1].split()[0])
+    assert headline.startswith("E+L − R+L = ") and seeds >= 2
+    assert len(table) == 2 + 4, "header, rule, 2 differences × 2 run lengths"
+    assert power.main([str(tmp_path / "runs"), "--history-only", "--pair", "E+L", "E+R"]) == 2
+    assert "E+R" in capsys.readouterr().err
+
+
 def test_one_seed_per_method_leaves_the_run_level_sections_out() -> None:
     robots = synthetic_robots(np.random.default_rng(9), n_robots=6, population_size=3)
     tables = ablation_tables(robots, Resampling.seeded(0, 100))
