@@ -36,7 +36,6 @@ every column the recording holds (``episode_length``, ``reward/...``, ``loss/...
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import warnings
@@ -51,8 +50,10 @@ from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
 from evo.record import read_curve
+from evo.run.layout import HISTORY, RunLayout
+from evo.run.records import RunSummary, read_run_summary, read_train_summary
+from evo.run.records import read_history as read_history_file
 
-HISTORY = "history.csv"
 DEFAULT_POPULATION = 20
 """``ga.population_size`` of the GA config, for a config that does not say."""
 EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
@@ -137,10 +138,10 @@ def find_run_dirs(paths: PathsLike) -> list[Path]:
             raise FileNotFoundError(f"{path}: no such run directory")
         if not path.is_dir():
             raise RunDirectoryError(f"{path}: not a directory; give a run directory")
-        if (path / HISTORY).is_file():
+        if RunLayout(path).is_run():
             found[path.resolve()] = None
             continue
-        inside = sorted(h.parent for h in path.rglob(HISTORY) if h.is_file())
+        inside = RunLayout.runs_under(path)
         if not inside:
             raise RunDirectoryError(
                 f"{path}: not a run directory (no {HISTORY}) and holds none"
@@ -173,7 +174,7 @@ def read_config(run_dir: Path) -> dict[str, Any]:
     Raises:
         RunDirectoryError: If the file is missing or not a YAML mapping.
     """
-    path = run_dir / "config.yaml"
+    path = RunLayout(run_dir).config
     if not path.is_file():
         raise RunDirectoryError(f"{path}: missing; every run directory holds its config")
     try:
@@ -191,10 +192,9 @@ def read_history(run_dir: Path) -> pd.DataFrame:
     Raises:
         RunDirectoryError: If it cannot be parsed or lacks a needed column.
     """
-    path = run_dir / HISTORY
+    path = RunLayout(run_dir).history
     try:
-        history = pd.read_csv(path, dtype={"name": str, "parents": str, "error": str,
-                                           "replaced": str, "operator": str})
+        history = read_history_file(path)
     except (OSError, ValueError, pd.errors.ParserError) as err:
         raise RunDirectoryError(f"{path}: not a readable history ({err})") from None
     needed = ("birth", "name", "budget", "fitness", "accepted")
@@ -216,25 +216,22 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> 
         methods = history["method"].dropna().unique()
         if len(methods) > 1:
             raise RunDirectoryError(
-                f"{run_dir / HISTORY}: one run holds one method, found {sorted(methods)}"
+                f"{RunLayout(run_dir).history}: one run holds one method, found "
+                f"{sorted(methods)}"
             )
         return str(methods[0])
     summary = _summary(run_dir)
-    if "method" in summary:
-        return str(summary["method"])
+    if summary is not None:
+        return summary.method
     ga, learner = config.get("ga", {}), config.get("learner", {})
     return f"{ga.get('structure', 'E')}+{'L' if learner.get('update', True) else 'R'}"
 
 
-def _summary(run_dir: Path) -> dict[str, Any]:
-    path = run_dir / "summary.json"
-    if not path.is_file():
-        return {}
+def _summary(run_dir: Path) -> RunSummary | None:
     try:
-        summary = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise RunDirectoryError(f"{path}: not readable JSON ({err})") from None
-    return summary if isinstance(summary, dict) else {}
+        return read_run_summary(RunLayout(run_dir).summary)
+    except ValueError as err:
+        raise RunDirectoryError(str(err)) from None
 
 
 def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd.DataFrame:
@@ -287,7 +284,8 @@ def read_robot_curve(run_dir: Path, name: str) -> tuple[pd.DataFrame | None, str
     Raises:
         RunDirectoryError: If the file that exists cannot be read.
     """
-    mcap, csv = run_dir / "evals" / f"{name}.mcap", run_dir / "evals" / f"{name}.csv"
+    layout = RunLayout(run_dir)
+    mcap, csv = layout.mcap(name), layout.curve(name)
     try:
         if mcap.is_file():
             return read_curve(mcap), "mcap"
@@ -341,9 +339,10 @@ def load_runs(paths: PathsLike, first: int | None = None) -> Runs:
     robots, curves, runs, notes = [], [], [], []
     for run, run_dir in zip(run_ids(dirs), dirs, strict=True):
         config = read_config(run_dir)
-        history, broken = _whole_rows(read_history(run_dir), run_dir / HISTORY)
+        history_path = RunLayout(run_dir).history
+        history, broken = _whole_rows(read_history(run_dir), history_path)
         if broken:
-            notes.append(f"run {run}: {broken} row(s) of {run_dir / HISTORY} cut mid-row "
+            notes.append(f"run {run}: {broken} row(s) of {history_path} cut mid-row "
                          "(a copy taken while it was written?) left out")
         method = run_method(run_dir, history, config)
         seed = _int_setting(config, "seed", run_dir)
@@ -407,11 +406,12 @@ def _whole_rows(history: pd.DataFrame, path: Path) -> tuple[pd.DataFrame, int]:
 
 def _status(run_dir: Path, broken: int) -> dict[str, Any]:
     """``complete`` and ``status`` of a run (see :class:`Runs`)."""
-    from evo.rundir import is_locked
+    from evo.run.files import is_locked
 
     if is_locked(run_dir):
         return dict(complete=False, status="running")
-    complete = bool(_summary(run_dir).get("complete", False)) and not broken
+    summary = _summary(run_dir)
+    complete = summary is not None and bool(summary.complete) and not broken
     return dict(complete=complete, status="complete" if complete else "partial")
 
 
@@ -420,7 +420,7 @@ def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:
         return int(config[key])
     except (KeyError, TypeError, ValueError):
         raise RunDirectoryError(
-            f"{run_dir / 'config.yaml'}: needs an integer '{key}', got {config.get(key)!r}"
+            f"{RunLayout(run_dir).config}: needs an integer '{key}', got {config.get(key)!r}"
         ) from None
 
 
@@ -454,11 +454,9 @@ def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
             rows.append(dict(structure=str(row.structure), train_seed=row.replicate,
                              fitness=float(row.fitness), budget=row.env_steps,
                              source=str(table_path.parent)))
-    summaries = {p for p in (path / "summary.json", *path.rglob("summary.json"))
-                 if p.is_file() and p.parent.name != "evals"}
-    for summary_path in sorted(summaries):
+    for summary_path in RunLayout.summaries_under(path):
         run_dir = summary_path.parent
-        if (run_dir / HISTORY).is_file():
+        if RunLayout(run_dir).is_run():
             for row in read_history(run_dir).itertuples(index=False):
                 rows.append(dict(structure=_structure(str(row.name)),
                                  train_seed=getattr(row, "seed", np.nan),
@@ -467,11 +465,14 @@ def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
                                  source=str(run_dir)))
             found = True
             continue
-        summary = _summary(run_dir)
-        if {"robot", "seed", "fitness"} <= summary.keys():
-            rows.append(dict(structure=_structure(str(summary["robot"])),
-                             train_seed=summary["seed"], fitness=float(summary["fitness"]),
-                             budget=summary.get("env_steps", np.nan), source=str(run_dir)))
+        try:
+            training = read_train_summary(summary_path)
+        except ValueError as err:
+            raise RunDirectoryError(str(err)) from None
+        if training is not None:
+            rows.append(dict(structure=_structure(str(training.robot)),
+                             train_seed=training.seed, fitness=float(training.fitness),
+                             budget=training.env_steps, source=str(run_dir)))
             found = True
     return rows, found
 

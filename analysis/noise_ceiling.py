@@ -405,7 +405,9 @@ def _jobs(out: Path, parts: Any, settings: Settings) -> dict[str, Any]:
 def _training_row(out: Path, training: Training, learner: str, settings: Settings,
                   outcome: Any) -> dict[str, Any]:
     """The ``trainings.csv`` row of one finished training."""
-    curve = read_curve(out / "evals" / f"{training.name}.csv")
+    from evo.run.layout import RunLayout
+
+    curve = read_curve(RunLayout(out).curve(training.name))
     return dict(
         name=training.name, structure=training.structure, role=training.role, learner=learner,
         replicate=training.replicate, seed=training.seed, budget=settings.budget,
@@ -426,16 +428,17 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
     """
     from evo.edge import executor_of, training_parts, warn_if_failures_cannot_end
     from evo.evaluation import Candidate, evaluate, outcome_of
-    from evo.robot.io import save_robot
-    from evo.rundir import write_csv
+    from evo.run.files import write_csv
+    from evo.run.store import RunStore
 
     parts = training_parts(cfg)
     warn_if_failures_cannot_end(settings.budget, "--budget", parts.learner, parts.env)
     jobs = _jobs(out, parts, settings)
     by_name = {r.name: r for r in robots}
-    (out / "robots").mkdir(parents=True, exist_ok=True)
+    store = RunStore(out)
+    store.prepare()
     for robot in robots:
-        save_robot(robot, out / "robots" / f"{robot.name}.json")
+        store.save_robot(robot.name, robot)
     rows = read_trainings(out).to_dict("records")
     done = {row["name"] for row in rows}
     plan = plan_trainings(settings.structures, seeds=settings.seeds, root=settings.root_seed,
@@ -480,7 +483,7 @@ def wall_seconds(out: Path) -> float:
 
 
 def _write_progress(out: Path, seconds: float) -> None:
-    from evo.rundir import write_json
+    from evo.run.files import write_json
 
     write_json(out / PROGRESS, {"wall_seconds": seconds})
 

@@ -52,8 +52,8 @@ KINDS = ("evaluation", "state-write", "recording", "between", "time")
 DRIVER = r"""
 import json, os, runpy, signal, sys
 import evo.evaluation as evaluation
-import evo.evolution as evolution
 import evo.record.run as run_record
+import evo.run.files as run_files
 
 main_file, kind, k, argv = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
 calls = 0
@@ -69,7 +69,7 @@ def die():
     os.kill(os.getpid(), signal.SIGKILL)
 
 
-real_write, real_open, real_birth = (evolution.write_json, evaluation.open_recorder,
+real_write, real_open, real_birth = (run_files.write_json, evaluation.open_recorder,
                                      run_record.RunRecorder.birth)
 real_save = evaluation.save_checkpoint
 
@@ -130,7 +130,7 @@ def birth(self, b):
         die()
 
 
-evolution.write_json, evaluation.open_recorder = write_json, open_recorder
+run_files.write_json, evaluation.open_recorder = write_json, open_recorder
 evaluation.save_checkpoint = save_checkpoint
 run_record.RunRecorder.birth = birth
 sys.argv = [main_file, *argv]

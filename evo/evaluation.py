@@ -2,7 +2,8 @@
 
 ``evaluate`` runs in a worker process (or a Ray task), so its inputs and outputs are
 plain picklable values. It never raises: a failure comes back as an ``Outcome`` with the
-error, and the evolution loop records it and goes on.
+error, and the evolution loop records it and goes on. The learner is the one the job's
+learner config names (``evo.learners.get_learner``) unless the caller passes another.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ import json
 import math
 import time
 import traceback
-from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack
@@ -24,13 +24,14 @@ from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
 from evo.interrupt import critical, raised
-from evo.learners import get_learner
+from evo.learners import Learner, get_learner
 from evo.learners.common import LearnerConfig, save_checkpoint
 from evo.learners.rollouts import play
 from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import parse_robot
 from evo.robot.tree import Robot
+from evo.run.layout import RunLayout
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,8 +64,8 @@ class Candidate:
         seed: The evaluation's own seed.
         parents: Names of the parents (empty for random robots).
         operator: How the robot was made (random, crossover, ...).
-        threshold: The population minimum it must beat to enter the population (NaN
-            when it enters anyway, an initial robot, or early rejection is off).
+        threshold: The population minimum it was bred against, which it must beat to
+            enter the population (NaN when it enters anyway: an initial robot).
     """
 
     birth: int
@@ -143,14 +144,21 @@ class EpisodeSampler:
         self.held = None
 
 
-def evaluate(candidate: Candidate, job: Job) -> Outcome:
-    """Train ``candidate``'s robot for its budget; write ``evals/<name>.pt``, ``.csv`` and the
-    recordings (``.mcap``, ``.rrd``) the record config asks for."""
+def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> Outcome:
+    """Train ``candidate``'s robot for its budget; write its policy, its learning curve
+    and the recordings the record config asks for (``evo.run.layout.RunLayout``).
+
+    Args:
+        candidate: The robot to train.
+        job: What every evaluation of the run shares.
+        learner: The training function; by default the one ``job.learner`` names.
+    """
 
     start = time.perf_counter()
     try:
         robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
-        outcome = _train_and_record(robot, candidate, job, start)
+        train = get_learner(job.learner) if learner is None else learner
+        outcome = _train_and_record(robot, candidate, job, train, start)
     except Exception as err:  # noqa: BLE001 - any failure is recorded and the run goes on
         if (stop := raised()) is not None:  # a signal, turned into another error on its way
             raise stop from err
@@ -159,22 +167,22 @@ def evaluate(candidate: Candidate, job: Job) -> Outcome:
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 
-def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float) -> Outcome:
-    evals = Path(job.run_dir) / "evals"
-    evals.mkdir(parents=True, exist_ok=True)
+def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Learner,
+                      start: float) -> Outcome:
+    layout = RunLayout(Path(job.run_dir))
+    layout.evals.mkdir(parents=True, exist_ok=True)
     model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
     metadata = {
         "robot": candidate.robot, "config": job.config_yaml, "seed": candidate.seed,
         "method": job.method, "birth": candidate.birth, "budget": candidate.budget,
         "parents": list(candidate.parents), "replay_seed": candidate.seed,
     }
-    rule = (StoppingRule(job.early, candidate.budget, _population_minimum(Path(job.run_dir),
-                                                                     candidate.threshold))
+    rule = (StoppingRule(job.early, candidate.budget, candidate.threshold)
             if job.early.enabled and math.isfinite(candidate.threshold) else None)
     with ExitStack() as stack:
         with critical():  # a signal here waits until the recorder is on the stack
             recorder = stack.enter_context(
-                open_recorder(job.record, evals, candidate.name, model, metadata))
+                open_recorder(job.record, layout.evals, candidate.name, model, metadata))
 
         def on_curve(row: dict[str, float]) -> bool:
             recorder.curve(row)
@@ -187,7 +195,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float
             return rule is not None and rule(row)
 
         sampler = EpisodeSampler(recorder, job.record)
-        result = get_learner(job.learner)(
+        result = learner(
             robot, physics=job.physics, env=job.env, config=job.learner, budget=candidate.budget,
             seed=candidate.seed, on_curve=on_curve,
             on_episode=sampler if job.record.enabled else None,
@@ -198,8 +206,8 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float
                                seed=candidate.seed)
             recorder.episode(dataclasses.replace(final, index=sampler.count,
                                                  env_step=result.env_steps))
-        result.curve.to_csv(evals / f"{candidate.name}.csv", index=False)
-        save_checkpoint(result.policy, evals / f"{candidate.name}.pt", job.learner,
+        result.curve.to_csv(layout.curve(candidate.name), index=False)
+        save_checkpoint(result.policy, layout.policy(candidate.name), job.learner,
                         robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
@@ -209,19 +217,3 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, start: float
                    env_steps=result.env_steps, episodes=result.episodes,
                    extra={"unstable": float(result.unstable)},
                    stopped_early=result.stopped_early, predicted=predicted)
-
-
-def _population_minimum(run_dir: Path, at_breeding: float) -> Callable[[], float]:
-    """The population minimum an offspring must beat: the one it was bred against, or
-    the current one from ``population.json`` when this process can read it (a local
-    executor shares the run directory; the population only improves)."""
-
-    def current() -> float:
-        try:
-            population = json.loads((run_dir / "population.json").read_text())["population"]
-            now = min(float(m["fitness"]) for m in population)
-        except (OSError, ValueError, KeyError, TypeError):
-            return at_breeding
-        return max(now, at_breeding) if math.isfinite(at_breeding) else at_breeding
-
-    return current

@@ -39,8 +39,7 @@ from evo.edge import (
     warn_if_failures_cannot_end,
 )
 from evo.evaluation import Job
-from evo.evolution import Evolution, RunLog, SavedState, load_state
-from evo.history import HistoryRow
+from evo.evolution import Evolution, RunLog
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.robot import (
     InvalidRobotError,
@@ -49,7 +48,10 @@ from evo.robot import (
     load_robot,
     random_robots,
 )
-from evo.rundir import RunDirectoryBusy, RunLock, busy_message, is_locked
+from evo.run.files import RunDirectoryBusy, RunLock, busy_message, is_locked
+from evo.run.layout import RunLayout
+from evo.run.records import HistoryRow
+from evo.run.store import RunStore, SavedState
 
 
 def _robot(cfg: DictConfig) -> Robot:
@@ -74,7 +76,7 @@ def run_robots(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         robots = random_robots(rng, count, generator_of(cfg), limits_of(cfg))
     except ValueError as err:
         raise ConfigError(f"robots.count: {err}") from None
-    write_gallery(robots, out / "robots", physics_of(cfg), bool(cfg.robots.render))
+    write_gallery(robots, RunLayout(out).robots, physics_of(cfg), bool(cfg.robots.render))
 
 
 def run_train(cfg: DictConfig, out: Path, lock: RunLock) -> None:
@@ -146,8 +148,8 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues.
 
     Everything is checked before anything is written: the config, and when the
-    directory holds a run, its saved state (:func:`evo.evolution.load_state`). A resume
-    that fails leaves the directory as it was.
+    directory holds a run, its saved state (:meth:`evo.run.store.RunStore.load`). A
+    resume that fails leaves the directory as it was.
     """
     from evo.progress import evolution_progress, print_summary
 
@@ -156,7 +158,8 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         cfg = _resumed_config(Path(str(cfg.resume)))
         check_seed(cfg)
     parts = evolve_parts(cfg, out)
-    saved = _state_to_continue(out, resuming)
+    store = RunStore(out)
+    saved = _state_to_continue(store, resuming)
     if resuming:
         lock.claim()
     budgets = parts.ga.budgets()
@@ -164,7 +167,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     evolution: Evolution | None = None
     try:
         with critical():  # opened whole, so the finally below can close it
-            log = RunLog(out, parts.job.record, {
+            log = RunLog(store, parts.job.record, {
                 "config": parts.job.config_yaml, "seed": int(cfg.seed),
                 "method": parts.job.method, "name": out.name})
         with evolution_progress(budgets, parts.job.method) as show:
@@ -174,7 +177,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                 assert log is not None
                 log(row)
 
-            evolution = Evolution(out, ga=parts.ga, strategy=parts.strategy, job=parts.job,
+            evolution = Evolution(store, ga=parts.ga, strategy=parts.strategy, job=parts.job,
                                   executor=parts.executor, seed=int(cfg.seed),
                                   on_result=on_result)
             if saved is not None:
@@ -191,41 +194,30 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     print_summary(summary, out)
 
 
-def _state_to_continue(out: Path, resuming: bool) -> SavedState | None:
-    """The checked saved state of the run in ``out``, or None for a run that starts
+def _state_to_continue(store: RunStore, resuming: bool) -> SavedState | None:
+    """The checked saved state of the run in ``store``, or None for a run that starts
     (a resume that stopped before its first result starts from the beginning)."""
-    if (out / "state.json").exists() or (resuming and _evaluated_before(out)):
-        return _saved_state(out)
+    if store.has_state() or (resuming and store.evaluated_before()):
+        return _saved_state(store)
     if resuming:
-        print(f"{out}: no robot was evaluated before the run stopped (no state.json yet); "
-              "starting it from the beginning", file=sys.stderr)
+        print(f"{store.root}: no robot was evaluated before the run stopped (no "
+              f"{store.layout.state.name} yet); starting it from the beginning",
+              file=sys.stderr)
     return None
 
 
-def _evaluated_before(run_dir: Path) -> bool:
-    """Whether ``run_dir`` holds results of evaluations (a history or policies)."""
-    return (run_dir / "history.csv").exists() or any((run_dir / "evals").glob("*.pt"))
-
-
-def _saved_state(run_dir: Path) -> SavedState:
-    """The checked state of the run in ``run_dir``; a clear ``ConfigError`` otherwise."""
-    if not (run_dir / "state.json").exists():
-        found = []
-        if (run_dir / "history.csv").is_file():
-            rows = max(0, len((run_dir / "history.csv").read_text().splitlines()) - 1)
-            found.append(f"history.csv with {rows} row(s)")
-        policies = len(list((run_dir / "evals").glob("*.pt")))
-        if policies:
-            found.append(f"evals/ with {policies} trained polic{'y' if policies == 1 else 'ies'}")
-        if (run_dir / "robots").is_dir():
-            found.append(f"robots/ with {len(list((run_dir / 'robots').glob('*.json')))} "
-                         "robot(s)")
+def _saved_state(store: RunStore) -> SavedState:
+    """The checked state of the run in ``store``; a clear ``ConfigError`` otherwise."""
+    run_dir = store.root
+    if not store.has_state():
+        found = store.leftovers()
         held = f" It holds {' and '.join(found)} of an earlier run." if found else ""
         raise ConfigError(
-            f"resume: {run_dir} has no state.json, so there is no run to continue.{held} "
-            f"To start afresh, choose a new hydra.run.dir (or empty {run_dir} first)")
+            f"resume: {run_dir} has no {store.layout.state.name}, so there is no run to "
+            f"continue.{held} To start afresh, choose a new hydra.run.dir (or empty "
+            f"{run_dir} first)")
     try:
-        return load_state(run_dir)
+        return store.load()
     except ValueError as err:
         raise ConfigError(f"resume: {err}") from None
 
@@ -240,7 +232,7 @@ def check_seed(cfg: DictConfig) -> int:
 
 def _resumed_config(run_dir: Path) -> DictConfig:
     """The resolved config a run directory was started with."""
-    path = run_dir / "config.yaml"
+    path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
     extra = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
@@ -264,8 +256,9 @@ def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> No
     would mix two runs in one directory, and is refused before anything is written.
     """
     text = OmegaConf.to_yaml(cfg, resolve=True)
-    path = out / "config.yaml"
-    if (out / "state.json").exists() and path.is_file() and path.read_text() != text:
+    layout = RunLayout(out)
+    path = layout.config
+    if layout.state.exists() and path.is_file() and path.read_text() != text:
         raise ConfigError(
             f"hydra.run.dir: {out} already holds a run with another config; continue it "
             f"with resume={out}, or choose a new output directory"
@@ -285,7 +278,7 @@ TASKS: dict[str, Callable[[DictConfig, Path, RunLock], None]] = {
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def main(cfg: DictConfig) -> None:
-    """Dispatch on ``task`` in a run directory this process owns (``evo.rundir``).
+    """Dispatch on ``task`` in a run directory this process owns (``evo.run.files``).
 
     A bad config value, or a directory another process holds, ends the run with one
     clear line (exit 2). SIGINT or SIGTERM stop it cleanly (``evo.interrupt``): the
@@ -357,7 +350,7 @@ def _resume_in_place(argv: list[str]) -> list[str]:
     for arg in argv:
         if arg.startswith("resume=") and arg != "resume=null":
             run_dir = arg.split("=", 1)[1]
-            if not (Path(run_dir) / "config.yaml").is_file():
+            if not RunLayout(Path(run_dir)).config.is_file():
                 print(
                     f"error: bad config: resume: {run_dir} is not an evo run directory "
                     "(no config.yaml)",

@@ -8,7 +8,6 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 from rich.console import Console
 from rich.progress import (
@@ -21,7 +20,8 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from evo.history import HistoryRow
+from evo.run.layout import RunLayout
+from evo.run.records import HistoryRow, RunSummary
 
 
 class EvolutionProgress:
@@ -111,47 +111,46 @@ def evolution_progress(budgets: list[int], method: str,
         yield EvolutionProgress(budgets, method, console, progress, task)
 
 
-def print_summary(summary: dict[str, Any], run_dir: Path, console: Console | None = None) -> None:
+def print_summary(summary: RunSummary, run_dir: Path, console: Console | None = None) -> None:
     """The final table: best robot, fitness, speed, and where the files are."""
     console = console or Console()
-    table = Table(title=f"evolution {summary['method']}", show_header=False)
-    for key in (
-        "robots_evaluated",
-        "failed",
-        "best_robot",
-        "best_fitness",
-        "best_initial_fitness",
-        "accept_rate",
-        "env_steps",
-        "wall_seconds",
-        "steps_per_second",
+    table = Table(title=f"evolution {summary.method}", show_header=False)
+    for key, value in (
+        ("robots_evaluated", summary.robots_evaluated),
+        ("failed", summary.failed),
+        ("best_robot", summary.best_robot),
+        ("best_fitness", summary.best_fitness),
+        ("best_initial_fitness", summary.best_initial_fitness),
+        ("accept_rate", summary.accept_rate),
+        ("env_steps", summary.env_steps),
+        ("wall_seconds", summary.wall_seconds),
+        ("steps_per_second", summary.steps_per_second),
     ):
-        value = summary[key]
         text = f"{value:,.4g}" if isinstance(value, float) else str(value)
         table.add_row(key.replace("_", " "), text)
     console.print(table)
-    if summary.get("best_note"):
-        console.print(f"[yellow]warning:[/yellow] {summary['best_note']}", soft_wrap=True)
+    if summary.best_note:
+        console.print(f"[yellow]warning:[/yellow] {summary.best_note}", soft_wrap=True)
     for line in where_to_look(summary, run_dir):
         console.print(line, soft_wrap=True, highlight=False)
 
 
-def where_to_look(summary: dict[str, Any], run_dir: Path) -> list[str]:
+def where_to_look(summary: RunSummary, run_dir: Path) -> list[str]:
     """Where the best robot's files are and the commands that open them."""
-    lines = [f"history: {run_dir / 'history.csv'}   summary: {run_dir / 'summary.json'}"]
-    best = summary["best_robot"]
+    layout = RunLayout(run_dir)
+    lines = [f"history: {layout.history}   summary: {layout.summary}"]
+    best = summary.best_robot
     if not best:
         return lines
-    robot = run_dir / "robots" / f"{best}.json"
-    evals = run_dir / "evals"
-    lines += [f"best robot: {robot}", f"its policy: {evals / f'{best}.pt'}"]
-    recordings = [evals / f"{best}{ext}" for ext in (".rrd", ".mcap")]
+    robot, policy = layout.robot(best), layout.policy(best)
+    lines += [f"best robot: {robot}", f"its policy: {policy}"]
+    recordings = [layout.rrd(best), layout.mcap(best)]
     lines += [f"recording: {path}" for path in recordings if path.is_file()]
     lines += [
         "open them:",
         f"  python -m evo.robot info {robot}  # modules, sizes",
         f"  python -m evo.replay {run_dir} {best} --video {run_dir / f'{best}.mp4'}",
-        f"  python evo/main.py +exp=evaluate robot={robot} checkpoint={evals / f'{best}.pt'}",
+        f"  python evo/main.py +exp=evaluate robot={robot} checkpoint={policy}",
     ]
     if recordings[0].is_file():
         lines.append(f"  rerun {recordings[0]}  # 3D episodes and learning curve")

@@ -22,7 +22,6 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from evo.config import ConfigError
@@ -36,10 +35,12 @@ from evo.robot.io import RobotFileError, load_robot
 from evo.robot.render import RenderError, make_renderer
 from evo.robot.tree import Robot
 from evo.robot.validate import InvalidRobotError
+from evo.run.layout import RunLayout, TrainLayout
+from evo.run.records import read_history
 
 
 def _run_config(run_dir: Path) -> tuple[PhysicsParams, EnvConfig]:
-    path = run_dir / "config.yaml"
+    path = RunLayout(run_dir).config
     if not path.is_file():
         raise ValueError(f"{path} not found; is {run_dir} an evo run directory?")
     cfg = OmegaConf.load(path)
@@ -49,20 +50,18 @@ def _run_config(run_dir: Path) -> tuple[PhysicsParams, EnvConfig]:
 
 def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
     """The robot and its policy checkpoint, in either run-directory layout."""
+    run, train = RunLayout(run_dir), TrainLayout(run_dir)
     if name is None:
-        robot_path, policy_path = run_dir / "robot.json", run_dir / "policy.pt"
-        if not robot_path.exists() and (run_dir / "robots").is_dir():
-            names = sorted(p.stem for p in (run_dir / "robots").glob("*.json"))
+        robot_path, policy_path = train.robot, train.policy
+        if not robot_path.exists() and run.robots.is_dir():
+            names = run.robot_names()
             shown = ", ".join(names[:5]) + (", ..." if len(names) > 5 else "")
             raise ValueError(f"{run_dir} is an evolution run: name the robot to replay "
                              f"(python -m evo.replay {run_dir} NAME); its robots: {shown}")
     else:
-        robot_path, policy_path = (
-            run_dir / "robots" / f"{name}.json",
-            run_dir / "evals" / f"{name}.pt",
-        )
-        if not robot_path.exists() and (run_dir / "robot.json").exists():
-            robot_path, policy_path = run_dir / "robot.json", run_dir / "policy.pt"
+        robot_path, policy_path = run.robot(name), run.policy(name)
+        if not robot_path.exists() and train.robot.exists():
+            robot_path, policy_path = train.robot, train.policy
     if not robot_path.exists():
         raise ValueError(f"{robot_path} not found: no robot {name!r} in {run_dir}")
     return load_robot(robot_path), policy_path
@@ -138,12 +137,11 @@ def tracking_shot(brain: npt.NDArray[np.float64], target: npt.NDArray[np.float64
 
 def recorded_seed(run_dir: Path, name: str | None) -> int:
     """The seed of the deterministic episode recorded after training (0 if unknown)."""
-    mcap = run_dir / "evals" / f"{name}.mcap"
-    if name is None or not mcap.is_file():
+    if name is None or not RunLayout(run_dir).mcap(name).is_file():
         return 0
     from evo.record import read_metadata
 
-    return int(read_metadata(mcap).get("replay_seed", 0))
+    return int(read_metadata(RunLayout(run_dir).mcap(name)).get("replay_seed", 0))
 
 
 def replay(
@@ -181,11 +179,12 @@ def gallery(run_dir: Path, top: int, out: Path) -> Path:
     """A contact sheet of the ``top`` fittest robots of a run."""
     from evo.robot.gallery import contact_sheet
 
-    history = run_dir / "history.csv"
-    if not history.is_file():
-        raise ValueError(f"{history} not found; is {run_dir} an evolution run directory?")
-    rows = pd.read_csv(history).dropna(subset=["fitness"]).nlargest(top, "fitness")
-    robots = [load_robot(run_dir / "robots" / f"{n}.json") for n in rows["name"]]
+    layout = RunLayout(run_dir)
+    if not layout.history.is_file():
+        raise ValueError(f"{layout.history} not found; is {run_dir} an evolution run "
+                         "directory?")
+    rows = read_history(layout.history).dropna(subset=["fitness"]).nlargest(top, "fitness")
+    robots = [load_robot(layout.robot(n)) for n in rows["name"]]
     physics, _ = _run_config(run_dir)
     return contact_sheet(robots, physics, out)
 

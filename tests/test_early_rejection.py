@@ -139,9 +139,7 @@ def test_a_real_training_stops_only_when_it_cannot_win(
 # ---------------------------------------------------------------- in the evolution
 
 
-def test_a_stopped_offspring_never_enters_the_population(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_stopped_offspring_never_enters_the_population(tmp_path: Path) -> None:
     def stops_every_third(candidate: Candidate, job: Job) -> Outcome:
         outcome = fake_evaluate(candidate, job)
         if candidate.parents and candidate.birth % 3 == 0:
@@ -162,9 +160,9 @@ def test_a_stopped_offspring_never_enters_the_population(
     population = {m["name"] for m in json.loads((tmp_path / "population.json").read_text())[
         "population"]}
     assert not population & set(stopped["name"])
-    assert summary["best_fitness"] < 9.0, "a stopped robot is never named best"
-    assert summary["stopped_early"] == len(stopped)
-    assert summary["env_steps_saved"] == int((stopped["budget"] - stopped["env_steps"]).sum())
+    assert summary.best_fitness < 9.0, "a stopped robot is never named best"
+    assert summary.stopped_early == len(stopped)
+    assert summary.env_steps_saved == int((stopped["budget"] - stopped["env_steps"]).sum())
 
 
 EARLY = [*TINY, "ga.robot_budget=8", "ga.schedule.initial=1024", "ga.schedule.first=2048",

@@ -13,6 +13,7 @@ Two tiers:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -29,7 +30,6 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import evo.evolution as evolution_module
 from evo.components.executors import LocalExecutor, SerialExecutor
 from evo.components.ga import (
     BudgetSchedule,
@@ -43,10 +43,11 @@ from evo.components.ga import (
 from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, evaluation_seed
-from evo.history import HistoryRow
 from evo.learners.common import LearnerConfig
 from evo.robot import OperatorError, load_robot
 from evo.robot.builder import PhysicsParams
+from evo.run.records import HistoryRow
+from evo.run.store import RunStore
 
 REPO = Path(__file__).resolve().parents[1]
 SCHEDULE = BudgetSchedule(initial=100, first=200, last=1000)
@@ -91,11 +92,12 @@ def make_evolution(
     executor: Any = None,
     on_result: Callable[[HistoryRow], None] | None = None,
     evaluate: Callable[[Candidate, Job], Outcome] = fake_evaluate,
+    store: RunStore | None = None,
 ) -> Evolution:
     ga = GAConfig(population, budget, selection=Roulette(), replacement=ReplaceWorst(),
                   schedule=SCHEDULE)
     return Evolution(
-        run_dir,
+        store or RunStore(run_dir),
         ga=ga,
         strategy=Evolve(ga) if structure == "E" else RandomStructures(),
         job=Job(PhysicsParams(), EnvConfig(), LearnerConfig(), str(run_dir), f"{structure}+L"),
@@ -110,7 +112,8 @@ def read_history(run_dir: Path) -> pd.DataFrame:
     """history.csv with empty text cells as "" (and a failed robot's fitness as NaN)."""
     text = {column: str for column in ("parents", "replaced", "error")}
     history = pd.read_csv(run_dir / "history.csv", dtype=text, keep_default_na=False)
-    history["fitness"] = pd.to_numeric(history["fitness"], errors="coerce")
+    for column in ("fitness", "threshold"):
+        history[column] = pd.to_numeric(history[column], errors="coerce")
     return history
 
 
@@ -135,11 +138,13 @@ def check_steady_state(run_dir: Path, population_size: int, robot_budget: int, s
             for parent in row.parents.split(";"):
                 assert parent in population, f"{row.name}: parent {parent} not in population"
         if len(population) < population_size and not row.parents:
+            assert math.isnan(row.threshold), f"{row.name}: an initial robot beats nothing"
             assert row.accepted == ok and not row.replaced
             if ok:
                 population[row.name] = row.fitness
         else:
             worst = min(population, key=lambda n: population[n])
+            assert row.threshold == population[worst], f"{row.name}: bred against the minimum"
             accepted = ok and row.fitness > population[worst]
             assert row.accepted == accepted, f"{row.name}: accepted should be {accepted}"
             if accepted:
@@ -172,7 +177,7 @@ def test_evolution_follows_the_steady_state_rules(tmp_path: Path) -> None:
     assert (offspring["operator"] == "crossover").all()
     assert offspring["parents"].str.count(";").eq(1).all(), "two parents per offspring"
     assert 0 < offspring["accepted"].sum() < len(offspring), "replacement is a real choice"
-    assert summary["accept_rate"] == pytest.approx(offspring["accepted"].mean())
+    assert summary.accept_rate == pytest.approx(offspring["accepted"].mean())
 
 
 def test_random_structure_strategy_has_no_parents(tmp_path: Path) -> None:
@@ -198,7 +203,7 @@ class NoCrossover:
 def test_failed_breeding_falls_back_to_a_random_robot(tmp_path: Path) -> None:
     run = make_evolution(tmp_path, population=3, budget=8)
     run.strategy = NoCrossover()
-    assert run.run()["complete"]
+    assert run.run().complete
     check_steady_state(tmp_path, 3, 8, seed=3)
     history = read_history(tmp_path)
     assert (history["operator"][3:] == "random-fallback").all()
@@ -214,9 +219,7 @@ def test_the_same_seed_gives_the_same_run(tmp_path: Path) -> None:
     assert list(a["name"]) != list(c["name"])
 
 
-def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_robot_that_finished_no_episode_is_not_silently_named_best(tmp_path: Path) -> None:
     def unfinished_when_fit(candidate: Candidate, job: Job) -> Outcome:
         outcome = fake_evaluate(candidate, job)  # fitness above 0: no episode ended
         return dataclasses.replace(outcome, episodes=0 if outcome.fitness > 0 else 3)
@@ -225,15 +228,13 @@ def test_a_robot_that_finished_no_episode_is_not_silently_named_best(
     history = read_history(tmp_path / "some")
     finished = history[history["episodes"] > 0]
     assert (history["episodes"] == 0).any() and len(finished)
-    assert summary["best_fitness"] == finished["fitness"].max() and not summary["best_note"]
+    assert summary.best_fitness == finished["fitness"].max() and not summary.best_note
     summary = make_evolution(tmp_path / "none", evaluate=lambda candidate, job: dataclasses.replace(
         fake_evaluate(candidate, job), episodes=0)).run()
-    assert summary["best_robot"] and "no robot finished an episode" in summary["best_note"]
+    assert summary.best_robot and "no robot finished an episode" in summary.best_note
 
 
-def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
     def flaky(candidate: Candidate, job: Job) -> Outcome:
         if candidate.birth in (1, 6):
             raise RuntimeError(f"simulated crash of {candidate.name}")
@@ -245,31 +246,25 @@ def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(
         row = history.loc[birth]
         assert "simulated crash" in row["error"], row["error"]
         assert math.isnan(row["fitness"]) and not row["accepted"]
-    assert summary["failed"] == 2 and summary["complete"]
+    assert summary.failed == 2 and summary.complete
     # The failed initial robot left a gap that the next random robot filled.
     assert history.loc[4, "operator"] == "random" and history.loc[4, "accepted"]
     check_steady_state(tmp_path, 4, 12, seed=3)
 
 
-def test_an_error_inside_training_is_recorded_with_its_traceback(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    import evo.evaluation as evaluation
-
+def test_an_error_inside_training_is_recorded_with_its_traceback(tmp_path: Path) -> None:
     def broken_learner(*args: Any, **kwargs: Any) -> Any:
         raise FloatingPointError("policy diverged")
 
-    monkeypatch.setattr(evaluation, "get_learner", lambda config: broken_learner)
-    summary = make_evolution(tmp_path, population=2, budget=3, evaluate=evaluate).run()
+    summary = make_evolution(tmp_path, population=2, budget=3,
+                             evaluate=functools.partial(evaluate, learner=broken_learner)).run()
     history = read_history(tmp_path)
     assert len(history) == 3 and history["fitness"].isna().all()
     assert history["error"].str.contains("FloatingPointError: policy diverged").all()
-    assert summary["failed"] == 3 and summary["best_robot"] is None and summary["complete"]
+    assert summary.failed == 3 and summary.best_robot is None and summary.complete
 
 
-def test_a_dead_worker_is_recorded_and_the_run_goes_on(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_dead_worker_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
     run = make_evolution(tmp_path, population=3, budget=7, executor=LocalExecutor(workers=1),
                          evaluate=dies_on_birth_3)
     summary = run.run()
@@ -278,7 +273,7 @@ def test_a_dead_worker_is_recorded_and_the_run_goes_on(
     failed = history[history["error"] != ""]
     assert list(failed["birth"]) == [3], "only the evaluation that killed its worker fails"
     assert list(failed["error"]) == ["the worker process died"]
-    assert summary["failed"] == 1 and summary["complete"]
+    assert summary.failed == 1 and summary.complete
     check_steady_state(tmp_path, 3, 7, seed=3)
 
 
@@ -302,43 +297,55 @@ def crash_on_call(k: int, fn: Callable[..., Any], after: bool = False) -> Callab
     return wrapper
 
 
-def crash_on_state_write(k: int, torn: bool = False) -> Callable[..., Any]:
-    """write_json that crashes on the k-th state.json: right after writing it, or with
-    ``torn`` halfway through, leaving half of it in its temporary file."""
-    real = evolution_module.write_json
-    calls = 0
+class RobotFileCrash(RunStore):
+    """A store that crashes right after writing its k-th robot file."""
 
-    def write_json(path: Path, data: dict[str, Any]) -> Path:
-        nonlocal calls
-        if path.name != "state.json":
-            return real(path, data)
-        calls += 1
-        if calls == k and torn:
+    def __init__(self, root: Path, k: int) -> None:
+        super().__init__(root)
+        self.k, self.calls = k, 0
+
+    def save_robot(self, name: str, robot: Any) -> Path:
+        path = super().save_robot(name, robot)
+        self.calls += 1
+        if self.calls == self.k:
+            raise Crash(f"crash after robot file {self.k}")
+        return path
+
+
+class StateWriteCrash(RunStore):
+    """A store that crashes on its k-th state.json: right after writing it, or with
+    ``torn`` halfway through, leaving half of it in its temporary file."""
+
+    def __init__(self, root: Path, k: int, torn: bool = False) -> None:
+        super().__init__(root)
+        self.k, self.torn, self.calls = k, torn, 0
+
+    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
+        if path != self.layout.state:
+            return super().write_json(path, data)
+        self.calls += 1
+        if self.calls == self.k and self.torn:
             text = json.dumps(data)
             path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
             raise Crash("crash while writing the state")
-        real(path, data)
-        if calls == k:
+        super().write_json(path, data)
+        if self.calls == self.k:
             raise Crash("crash after writing the state")
         return path
-
-    return write_json
 
 
 BUDGET = 10
 POPULATION = 4
 # A run of BUDGET robots writes state.json once per submission and once per result.
 STATE_WRITES = 2 * BUDGET
-CRASHES: dict[str, Callable[[int], Any]] = {  # a faulty evaluate, or a patched global
-    "during-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate)),
-    "after-evaluation": lambda k: ("evaluate", crash_on_call(k, fake_evaluate, after=True)),
-    "writing-robot-file": lambda k: (
-        "save_robot",
-        crash_on_call(k, evolution_module.save_robot, after=True),
-    ),
-    "writing-state": lambda k: ("write_json", crash_on_state_write(2 * k, torn=True)),
-    "after-state": lambda k: ("write_json", crash_on_state_write(2 * k)),
-    "after-submit-state": lambda k: ("write_json", crash_on_state_write(2 * k - 1)),
+CRASHES: dict[str, Callable[[Path, int], dict[str, Any]]] = {  # a faulty evaluate or store
+    "during-evaluation": lambda run_dir, k: {"evaluate": crash_on_call(k, fake_evaluate)},
+    "after-evaluation": lambda run_dir, k: {
+        "evaluate": crash_on_call(k, fake_evaluate, after=True)},
+    "writing-robot-file": lambda run_dir, k: {"store": RobotFileCrash(run_dir, k)},
+    "writing-state": lambda run_dir, k: {"store": StateWriteCrash(run_dir, 2 * k, torn=True)},
+    "after-state": lambda run_dir, k: {"store": StateWriteCrash(run_dir, 2 * k)},
+    "after-submit-state": lambda run_dir, k: {"store": StateWriteCrash(run_dir, 2 * k - 1)},
 }
 
 
@@ -365,17 +372,12 @@ def same_run_files(a: Path, b: Path) -> None:
 @pytest.mark.parametrize("k", [1, POPULATION, POPULATION + 1, BUDGET])
 @pytest.mark.parametrize("where", CRASHES)
 def test_resume_after_a_crash_gives_the_uninterrupted_run(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path, where: str, k: int
+    tmp_path: Path, uninterrupted: Path, where: str, k: int
 ) -> None:
-    name, patched = CRASHES[where](k)
-    if name == "evaluate":
-        crashing = make_evolution(tmp_path, population=POPULATION, budget=BUDGET, evaluate=patched)
-    else:
-        monkeypatch.setattr(evolution_module, name, patched)
-        crashing = make_evolution(tmp_path, population=POPULATION, budget=BUDGET)
+    crashing = make_evolution(tmp_path, population=POPULATION, budget=BUDGET,
+                              **CRASHES[where](tmp_path, k))
     with pytest.raises(Crash):
         crashing.run()
-    monkeypatch.undo()
     # As evo/main.py does: resume when a state was saved, else start again.
     if (tmp_path / "state.json").exists():
         resumed = make_evolution(tmp_path, population=POPULATION, budget=BUDGET, seed=99)
@@ -388,13 +390,13 @@ def test_resume_after_a_crash_gives_the_uninterrupted_run(
 
 
 def test_resume_of_a_finished_run_evaluates_nothing(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, uninterrupted: Path
+    tmp_path: Path, uninterrupted: Path
 ) -> None:
     make_evolution(tmp_path, population=POPULATION, budget=BUDGET).run()
     again = make_evolution(tmp_path, population=POPULATION, budget=BUDGET,
                            evaluate=crash_on_call(1, fake_evaluate))
     again.resume()
-    assert again.run()["complete"]
+    assert again.run().complete
     same_run_files(uninterrupted, tmp_path)
 
 

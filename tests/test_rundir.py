@@ -37,7 +37,7 @@ from test_evolution import (
 )
 
 from evo.record import mcap_file, rrd
-from evo.rundir import RunDirectoryBusy, RunLock, is_locked
+from evo.run.files import RunDirectoryBusy, RunLock, is_locked
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from kill_resume import kill_and_resume, unreadable_files  # noqa: E402
@@ -239,7 +239,7 @@ def rows(run_dir: Path) -> int:
 HOLD = """
 import sys, time
 from pathlib import Path
-from evo.rundir import RunLock
+from evo.run.files import RunLock
 lock = RunLock(Path(sys.argv[1])).acquire()
 lock.claim()
 print("held", flush=True)
@@ -292,7 +292,7 @@ def interrupt(args: list[str], cwd: Path, run_dir: Path, sig: int) -> tuple[int,
 
 @pytest.mark.slow
 def test_sigterm_stops_the_run_cleanly_and_no_worker_outlives_it(tmp_path: Path) -> None:
-    from evo.evolution import load_state
+    from evo.run.store import RunStore
 
     run_dir = tmp_path / "run"
     returncode, err, kids = interrupt(
@@ -304,7 +304,7 @@ def test_sigterm_stops_the_run_cleanly_and_no_worker_outlives_it(tmp_path: Path)
     assert "Traceback" not in err, err[-3000:]
     assert kids, "the run had worker processes"
     wait_until(lambda: not any(alive(k) for k in kids), 5, "every worker gone")
-    saved = load_state(run_dir)  # resumable: what was in flight is pending
+    saved = RunStore(run_dir).load()  # resumable: what was in flight is pending
     assert saved.history and saved.pending
     assert unreadable_files(run_dir) == [], "every recording closed, in-flight ones too"
 

@@ -24,7 +24,7 @@ from evo.learners.common import load_checkpoint
 from evo.replay import main as replay_main
 from evo.robot import load_robot
 from evo.robot.__main__ import main as robot_main
-from evo.rundir import RunLock
+from evo.run.files import RunLock
 
 REPO = Path(__file__).resolve().parents[1]
 

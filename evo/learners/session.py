@@ -1,14 +1,16 @@
 """One robot trained or evaluated from the command line (``+exp=train``, ``+exp=evaluate``).
 
-``train_robot`` writes into the run directory: ``robot.json``, ``curve.csv`` (the
-learning curve, one row per collector batch), ``policy.pt`` (loads with
-``torch.load(..., weights_only=True)``) and ``summary.json`` (``fitness``,
-``success_rate``, ``eval_mean_return``, ``env_steps``, ``wall_seconds``,
-``steps_per_second`` and more), and shows progress while it runs.
+``train_robot`` writes into the run directory (``evo.run.layout.TrainLayout``):
+``robot.json``, ``curve.csv`` (the learning curve, one row per collector batch),
+``policy.pt`` (loads with ``torch.load(..., weights_only=True)``) and ``summary.json``
+(``evo.run.records.TrainSummary``: ``fitness``, ``success_rate``, ``eval_mean_return``,
+``env_steps``, ``wall_seconds``, ``steps_per_second`` and more), and shows progress while
+it runs.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -23,7 +25,9 @@ from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
-from evo.rundir import write_json
+from evo.run.files import write_json
+from evo.run.layout import TrainLayout
+from evo.run.records import TrainSummary, write_train_summary
 
 if TYPE_CHECKING:
     from evo.edge import TrainingParts
@@ -42,7 +46,7 @@ def _progress(console: Console) -> Progress:
 
 
 def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
-                console: Console | None = None) -> dict[str, Any]:
+                console: Console | None = None) -> TrainSummary:
     """Train ``robot`` for ``parts.learner.total_steps``, evaluate it, write the run files.
 
     Returns:
@@ -51,7 +55,8 @@ def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
     physics, env, learner = parts.physics, parts.env, parts.learner
     console = console or Console()
     out.mkdir(parents=True, exist_ok=True)
-    save_robot(robot, out / "robot.json")
+    layout = TrainLayout(out)
+    save_robot(robot, layout.robot)
     train = get_learner(learner)
     with _progress(console) as bar:
         task = bar.add_task(f"{learner.name} {robot.name}", total=learner.total_steps, status="")
@@ -70,42 +75,42 @@ def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
             seed=seed,
             on_curve=show,
         )
-    result.curve.to_csv(out / "curve.csv", index=False)
-    save_checkpoint(result.policy, out / "policy.pt", learner, robot=robot.hash)
+    result.curve.to_csv(layout.curve, index=False)
+    save_checkpoint(result.policy, layout.policy, learner, robot=robot.hash)
     summary = _train_summary(robot, result, physics=physics, env=env, learner=learner,
                              seed=seed)
-    write_json(out / "summary.json", summary)
+    write_train_summary(layout.summary, summary)
     console.print(
         f"{robot.name}: fitness {result.fitness:+.4f} over {result.episodes} episodes, "
         f"{result.env_steps:,} env steps in {result.wall_seconds:.1f} s "
         f"({result.steps_per_second:,.0f} steps/s)"
     )
-    if "success_rate" in summary:
+    if summary.success_rate is not None and summary.eval_mean_return is not None:
         console.print(
-            f"deterministic evaluation: success {summary['success_rate']:.0%}, mean return "
-            f"{summary['eval_mean_return']:+.4f} over {learner.eval_episodes} episodes"
+            f"deterministic evaluation: success {summary.success_rate:.0%}, mean return "
+            f"{summary.eval_mean_return:+.4f} over {learner.eval_episodes} episodes"
         )
     console.print(f"files: {out}")
     return summary
 
 
 def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
-                   env: EnvConfig, learner: LearnerConfig, seed: int) -> dict[str, Any]:
+                   env: EnvConfig, learner: LearnerConfig, seed: int) -> TrainSummary:
     """``summary.json`` of one training, with the deterministic evaluation (seed + 1)
     when ``learner.eval_episodes`` asks for one."""
-    summary: dict[str, Any] = {
-        "robot": robot.name,
-        "learner": learner.name,
-        "arena": env.name,
-        "seed": seed,
-        "fitness": result.fitness,
-        "episodes": result.episodes,
-        "env_steps": result.env_steps,
-        "wall_seconds": result.wall_seconds,
-        "steps_per_second": result.steps_per_second,
-        "unstable_episodes": result.unstable,
-        "timing_seconds": result.timing,
-    }
+    summary = TrainSummary(
+        robot=robot.name,
+        learner=learner.name,
+        arena=env.name,
+        seed=seed,
+        fitness=result.fitness,
+        episodes=result.episodes,
+        env_steps=result.env_steps,
+        wall_seconds=result.wall_seconds,
+        steps_per_second=result.steps_per_second,
+        unstable_episodes=result.unstable,
+        timing_seconds=result.timing,
+    )
     if learner.eval_episodes:
         evaluation = evaluate_policy(
             robot,
@@ -115,9 +120,9 @@ def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
             episodes=learner.eval_episodes,
             seed=seed + 1,
         )
-        summary["success_rate"] = evaluation.success_rate
-        summary["eval_mean_return"] = evaluation.mean_return
-        summary["eval_episodes"] = learner.eval_episodes
+        summary = dataclasses.replace(
+            summary, success_rate=evaluation.success_rate,
+            eval_mean_return=evaluation.mean_return, eval_episodes=learner.eval_episodes)
     return summary
 
 
@@ -139,7 +144,7 @@ def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingParts, *, seed
         **evaluation.summary(),
     }
     out.mkdir(parents=True, exist_ok=True)
-    write_json(out / "summary.json", summary)
+    write_json(TrainLayout(out).summary, summary)
     console.print(
         f"{robot.name}: success {evaluation.success_rate:.0%}, mean return "
         f"{evaluation.mean_return:+.4f} over {episodes} deterministic episodes"

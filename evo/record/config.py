@@ -106,6 +106,7 @@ def open_recorder(
         A ``Recorders`` fan-out, or a ``NullRecorder`` when recording is off.
     """
     from evo.record.base import NullRecorder, RecorderOptions, Recorders
+    from evo.run.layout import MCAP_SUFFIX, RRD_SUFFIX
 
     folder = Path(directory)
     meta = {"name": name, **metadata}
@@ -118,12 +119,12 @@ def open_recorder(
     if config.mcap:
         from evo.record.mcap_file import McapRecorder
 
-        recorders.append(McapRecorder(folder / f"{name}.mcap", model, meta, **options))
+        recorders.append(McapRecorder(folder / f"{name}{MCAP_SUFFIX}", model, meta, **options))
     if config.rerun:
         from evo.record.rrd import RerunRecorder
 
         try:
-            recorders.append(RerunRecorder(folder / f"{name}.rrd", model, meta, **options))
+            recorders.append(RerunRecorder(folder / f"{name}{RRD_SUFFIX}", model, meta, **options))
         except BaseException:
             for r in recorders:
                 r.close({"status": "failed", "error": "could not open the .rrd file"})

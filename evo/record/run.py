@@ -35,6 +35,7 @@ from evo.record.mcap_file import McapFile, scene_entity
 from evo.record.readback import read_json_topic
 from evo.record.rows import flatten, json_number, object_schema, plain
 from evo.record.rrd import entity, finish_rrd, log_geometry, open_rrd, release_streams
+from evo.run.layout import RunLayout
 
 TOPIC_BIRTHS = "/ga/births"
 TOPIC_ROBOTS = "/ga/robots"
@@ -129,12 +130,13 @@ class RunRecorder(RecorderBase):
     ) -> None:
         self.directory = Path(directory)
         meta = dict(metadata or {})
-        self.mcap = McapFile(self.directory / "run.mcap", meta) if mcap else None
+        layout = RunLayout(self.directory)
+        self.mcap = McapFile(layout.run_mcap, meta) if mcap else None
         self.rec: rr.RecordingStream | None = None
         if rerun:
             try:
                 name = str(meta.get("name", "run"))
-                self.rec = open_rrd(self.directory / "run.rrd", name, _blueprint(), "/robots")
+                self.rec = open_rrd(layout.run_rrd, name, _blueprint(), "/robots")
             except BaseException:
                 if self.mcap is not None:
                     self.mcap.close({"status": "failed", "error": "could not open run.rrd"})

@@ -26,8 +26,7 @@ from typing import Any
 
 import pandas as pd
 
-LOCK_INFO = "lock.json"
-"""Who holds (or last held) a run directory's lock: ``pid``, ``host``, ``since``."""
+from evo.run.layout import RunLayout
 
 
 def write_json(path: Path, data: dict[str, Any]) -> Path:
@@ -77,7 +76,7 @@ class RunLock:
         """Record this process as the holder (after the run's inputs are checked)."""
         assert self._fd is not None, "claim() needs acquire() first"
         since = time.strftime("%Y-%m-%d %H:%M:%S %z")
-        write_json(self.run_dir / LOCK_INFO,
+        write_json(RunLayout(self.run_dir).lock,
                    {"pid": os.getpid(), "host": socket.gethostname(), "since": since})
 
     def release(self) -> None:
@@ -102,7 +101,7 @@ def busy_message(run_dir: Path) -> str:
 def holder(run_dir: Path) -> str:
     """Who holds ``run_dir``'s lock, as recorded by :meth:`RunLock.claim`."""
     try:
-        info = json.loads((run_dir / LOCK_INFO).read_text())
+        info = json.loads(RunLayout(run_dir).lock.read_text())
         return f"PID {info['pid']} on {info['host']} since {info['since']}"
     except (OSError, ValueError, KeyError, TypeError):
         return "another process (it has not recorded its PID yet)"

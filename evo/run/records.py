@@ -1,0 +1,352 @@
+"""The typed records of a run's files, each with its one writer and its one reader.
+
+* :class:`HistoryRow`: one row of ``history.csv``, an evaluated robot and what the GA did
+  with it. The evolution appends one after every result and hands it to its listeners
+  (progress, ``run.mcap``/``run.rrd``). Its fields are the columns of ``history.csv``, in
+  order (:data:`HISTORY_COLUMNS`); ``record()`` is the row as ``state.json`` and
+  ``history.csv`` store it, where ``parents`` is one text cell, the parents' names joined
+  by ``;`` (:data:`PARENT_SEPARATOR`). :func:`write_history` writes the file,
+  :func:`read_history` reads it back as a table with those columns.
+* :class:`RunSummary`: an evolution's ``summary.json`` (:func:`write_run_summary`,
+  :func:`read_run_summary`).
+* :class:`TrainSummary`: a one-robot training's ``summary.json`` (``+exp=train``;
+  :func:`write_train_summary`, :func:`read_train_summary`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from evo.run.files import write_csv, write_json
+
+PARENT_SEPARATOR = ";"
+"""Joins the parents' names in the ``parents`` cell of history.csv and state.json."""
+
+STATUSES = ("trained", "stopped-early", "failed")
+"""``trained``: its whole budget; ``stopped-early``: early rejection stopped it (it never
+enters the population; ``fitness`` is Eq. 8 over the episodes it completed and
+``predicted`` the rule's prediction); ``failed``: the evaluation raised (``error``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class HistoryRow:
+    """One evaluated robot.
+
+    Attributes:
+        birth: Birth order in the run (0-based).
+        name: The robot's unique name in the run (``robots/<name>.json``).
+        method: The run's method label (``E+L``, ``R+R``, ...).
+        parents: The parents' names; empty for a random robot.
+        operator: How it was made (``random``, ``crossover``, ``random-fallback``, ...).
+        budget: Its training budget, env steps.
+        seed: Its evaluation seed.
+        fitness: Eq. 8 (NaN when the evaluation failed).
+        accepted: Whether it entered the population.
+        replaced: The member it replaced ("" if none).
+        env_steps: Env steps its training took.
+        episodes: Episodes its fitness averages.
+        wall_seconds: Wall time of its evaluation.
+        error: The failure's traceback ("" if none).
+        population_best: Best fitness in the population after it was recorded.
+        population_mean: Mean fitness of the population after it was recorded.
+        status: One of :data:`STATUSES`.
+        predicted: Early rejection's predicted final fitness (NaN if none).
+        threshold: The population minimum it was bred against, the fitness it had to
+            beat to enter (NaN for a robot of the initial population, and in runs
+            recorded before the column existed).
+    """
+
+    birth: int
+    name: str
+    method: str
+    parents: tuple[str, ...]
+    operator: str
+    budget: int
+    seed: int
+    fitness: float
+    accepted: bool
+    replaced: str
+    env_steps: int
+    episodes: int
+    wall_seconds: float
+    error: str
+    population_best: float
+    population_mean: float
+    status: str
+    predicted: float
+    threshold: float = math.nan
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"status must be one of {', '.join(STATUSES)}, got {self.status!r}")
+
+    @property
+    def failed(self) -> bool:
+        """Whether the evaluation failed."""
+        return bool(self.error)
+
+    @property
+    def stopped_early(self) -> bool:
+        """Whether early rejection stopped its training."""
+        return self.status == "stopped-early"
+
+    def record(self) -> dict[str, Any]:
+        """The row as ``state.json`` and ``history.csv`` hold it (``parents`` joined)."""
+        row = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        row["parents"] = PARENT_SEPARATOR.join(self.parents)
+        return row
+
+    @classmethod
+    def from_record(cls, row: Mapping[str, Any]) -> HistoryRow:
+        """The row ``record()`` wrote, from ``state.json`` or a row of :func:`read_history`
+        (an empty text cell, read as NaN, is ""); a run from before ``status``,
+        ``predicted`` and ``threshold`` existed gets ``trained``/``failed``, NaN and NaN.
+
+        Raises:
+            KeyError, TypeError, ValueError: A missing column or a value of the wrong type.
+        """
+        parents = _text(row["parents"])
+        error = _text(row["error"])
+        return cls(
+            birth=int(row["birth"]),
+            name=str(row["name"]),
+            method=str(row["method"]),
+            parents=tuple(parents.split(PARENT_SEPARATOR)) if parents else (),
+            operator=str(row["operator"]),
+            budget=int(row["budget"]),
+            seed=int(row["seed"]),
+            fitness=float(row["fitness"]),
+            accepted=bool(row["accepted"]),
+            replaced=_text(row["replaced"]),
+            env_steps=int(row["env_steps"]),
+            episodes=int(row["episodes"]),
+            wall_seconds=float(row["wall_seconds"]),
+            error=error,
+            population_best=float(row["population_best"]),
+            population_mean=float(row["population_mean"]),
+            status=_text(row.get("status")) or ("failed" if error else "trained"),
+            predicted=float(row.get("predicted", math.nan)),
+            threshold=float(row.get("threshold", math.nan)),
+        )
+
+
+def _text(value: object) -> str:
+    """A text cell: "" for a missing one (None, or NaN as pandas reads an empty cell)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    return str(value)
+
+
+HISTORY_COLUMNS = tuple(f.name for f in dataclasses.fields(HistoryRow))
+"""The columns of history.csv, in order (one row per evaluated robot)."""
+
+HISTORY_TEXT_COLUMNS = ("name", "parents", "error", "replaced", "operator")
+"""The columns of history.csv read as text whatever they hold (an empty cell is NaN)."""
+
+
+def write_history(path: Path, rows: Sequence[HistoryRow]) -> Path:
+    """Write ``history.csv`` (atomically): one row per evaluated robot, in ``rows``' order."""
+    return write_csv(path, pd.DataFrame([row.record() for row in rows],
+                                        columns=list(HISTORY_COLUMNS)))
+
+
+def read_history(path: Path) -> pd.DataFrame:
+    """``history.csv`` as written by :func:`write_history`, a column per field of
+    :class:`HistoryRow` it holds (a run recorded before a column existed lacks it).
+
+    Raises:
+        OSError, ValueError: The file is missing or not a readable CSV.
+    """
+    return pd.read_csv(path, dtype=dict.fromkeys(HISTORY_TEXT_COLUMNS, str))
+
+
+# ---------------------------------------------------------------- an evolution's summary
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """An evolution run so far: its ``summary.json``.
+
+    Attributes:
+        method: The run's method label (``E+L``, ...).
+        robots_evaluated: History rows so far.
+        robot_budget: Robots the run evaluates in all.
+        failed: Evaluations that failed.
+        best_robot: The best robot's name (None before one is trained).
+        best_fitness: Its fitness.
+        best_initial_fitness: The best fitness of a random (parentless) robot.
+        accept_rate: The share of offspring that entered the population.
+        env_steps: Env steps of every evaluation.
+        wall_seconds: Wall time over every session of the run.
+        steps_per_second: ``env_steps / wall_seconds``.
+        complete: Whether the budget is spent.
+        stopped_early: Offspring early rejection stopped.
+        env_steps_saved: Env steps of their budgets they did not use.
+        best_note: Why the best fitness is provisional ("" when it is not).
+    """
+
+    method: str
+    robots_evaluated: int
+    robot_budget: int
+    failed: int
+    best_robot: str | None
+    best_fitness: float | None
+    best_initial_fitness: float | None
+    accept_rate: float | None
+    env_steps: int
+    wall_seconds: float
+    steps_per_second: float
+    complete: bool
+    stopped_early: int = 0
+    env_steps_saved: int = 0
+    best_note: str = ""
+
+    @classmethod
+    def of(cls, history: Sequence[HistoryRow], *, method: str, robot_budget: int,
+           wall_seconds: float) -> RunSummary:
+        """The summary of a run with ``history`` so far."""
+        done = [r for r in history if not r.failed]
+        trained = [r for r in done if not r.stopped_early]
+        # A robot none of whose episodes ended has only a provisional fitness (the mean
+        # return of its unfinished episodes): it is named best only if no robot is better
+        # placed, and then with a note. A robot stopped early is never named best.
+        finished = [r for r in trained if r.episodes > 0]
+        best = max(finished or trained, key=lambda r: r.fitness, default=None)
+        initial = [r.fitness for r in done if not r.parents]
+        steps = int(sum(r.env_steps for r in history))
+        stopped = [r for r in history if r.stopped_early]
+        offspring = [r for r in history if r.parents]
+        return cls(
+            method=method,
+            robots_evaluated=len(history),
+            robot_budget=robot_budget,
+            failed=len(history) - len(done),
+            best_robot=best.name if best else None,
+            best_fitness=best.fitness if best else None,
+            best_initial_fitness=max(initial) if initial else None,
+            accept_rate=float(np.mean([r.accepted for r in offspring])) if offspring else None,
+            env_steps=steps,
+            wall_seconds=wall_seconds,
+            steps_per_second=steps / max(wall_seconds, 1e-9),
+            complete=len(history) >= robot_budget,
+            stopped_early=len(stopped),
+            env_steps_saved=int(sum(max(0, r.budget - r.env_steps) for r in stopped)),
+            best_note=(
+                "no robot finished an episode within its budget: the best fitness is the "
+                "mean return of unfinished episodes" if best and not finished else ""),
+        )
+
+    def record(self) -> dict[str, Any]:
+        """The summary as ``summary.json`` (and the run's recordings) hold it."""
+        return dataclasses.asdict(self)
+
+
+def write_run_summary(path: Path, summary: RunSummary) -> Path:
+    """Write an evolution's ``summary.json`` (atomically)."""
+    return write_json(path, summary.record())
+
+
+def read_run_summary(path: Path) -> RunSummary | None:
+    """An evolution's ``summary.json``; None when there is none yet.
+
+    Raises:
+        ValueError: Naming the file, when it is not a summary :func:`write_run_summary`
+            wrote (older runs lack ``stopped_early``, ``env_steps_saved`` and
+            ``best_note``, and read with their defaults).
+    """
+    data = _read_json(path)
+    if data is None:
+        return None
+    known = {f.name for f in dataclasses.fields(RunSummary)}
+    try:
+        return RunSummary(**{k: v for k, v in data.items() if k in known})
+    except TypeError as err:
+        raise ValueError(f"{path}: not an evolution's summary ({err})") from None
+
+
+# ---------------------------------------------------------------- a training's summary
+
+
+@dataclass(frozen=True)
+class TrainSummary:
+    """One robot's training (``+exp=train``): its ``summary.json``.
+
+    Attributes:
+        robot: The robot's name.
+        seed: The training seed.
+        fitness: Eq. 8 over its training episodes.
+        env_steps: Env steps it trained for.
+        learner: The learner's name.
+        arena: The env's name.
+        episodes: Episodes its fitness averages.
+        wall_seconds: Wall time of the training.
+        steps_per_second: Its speed.
+        unstable_episodes: Episodes cut short by a numerical blow-up.
+        timing_seconds: Wall time by phase of the training.
+        success_rate: Success rate of the deterministic evaluation (None without one).
+        eval_mean_return: Its mean return.
+        eval_episodes: Its episodes.
+    """
+
+    robot: str
+    seed: int
+    fitness: float
+    env_steps: float = math.nan
+    learner: str = ""
+    arena: str = ""
+    episodes: int = 0
+    wall_seconds: float = math.nan
+    steps_per_second: float = math.nan
+    unstable_episodes: int = 0
+    timing_seconds: dict[str, float] = field(default_factory=dict)
+    success_rate: float | None = None
+    eval_mean_return: float | None = None
+    eval_episodes: int | None = None
+
+    def record(self) -> dict[str, Any]:
+        """The summary as ``summary.json`` holds it (no evaluation keys without one)."""
+        data = dataclasses.asdict(self)
+        if self.eval_episodes is None:
+            for key in ("success_rate", "eval_mean_return", "eval_episodes"):
+                data.pop(key)
+        return data
+
+
+def write_train_summary(path: Path, summary: TrainSummary) -> Path:
+    """Write a training's ``summary.json`` (atomically)."""
+    return write_json(path, summary.record())
+
+
+def read_train_summary(path: Path) -> TrainSummary | None:
+    """A training's ``summary.json``; None when there is none, or it is another kind of
+    summary (an evolution's, an evaluation's: it names no ``robot``, ``seed`` and
+    ``fitness``).
+
+    Raises:
+        ValueError: Naming the file, when it is not readable JSON.
+    """
+    data = _read_json(path)
+    if data is None or not {"robot", "seed", "fitness"} <= data.keys():
+        return None
+    known = {f.name for f in dataclasses.fields(TrainSummary)}
+    return TrainSummary(**{k: v for k, v in data.items() if k in known})
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    """A JSON object file; None when it is missing or holds something else."""
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"{path}: not readable JSON ({err})") from None
+    return data if isinstance(data, dict) else None

@@ -1,0 +1,207 @@
+"""The store of an evolution run: saves, loads and checks its resumable state.
+
+The whole state (population, history, breeding RNG, next birth, robots in flight) is
+``state.json``, written atomically after every submission and every result, before the
+files derived from it (``history.csv``, ``population.json``, ``summary.json``).
+:meth:`RunStore.load` reads it back and checks it against the files it refers to,
+writing nothing. The evolution loop is given a store (``evo.evolution.Evolution``); a
+test that needs a store which fails at a chosen moment passes a subclass.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evo.components.ga import Member
+from evo.evaluation import Candidate
+from evo.robot.io import RobotFileError, load_robot, save_robot
+from evo.robot.tree import Robot
+from evo.robot.validate import InvalidRobotError
+from evo.run import files
+from evo.run.layout import RunLayout
+from evo.run.records import (
+    HistoryRow,
+    RunSummary,
+    read_history,
+    write_history,
+    write_run_summary,
+)
+
+STATE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class SavedState:
+    """A run's resumable state (what ``state.json`` holds), checked when loaded.
+
+    Attributes:
+        seed: The run's root seed.
+        next_birth: The birth number of the next robot.
+        rng: The breeding generator's ``bit_generator.state``.
+        population: The population's members.
+        history: Every evaluated robot, in the order recorded.
+        pending: The robots in flight.
+        wall_seconds: Wall time over every session so far.
+    """
+
+    seed: int
+    next_birth: int
+    rng: dict[str, Any]
+    population: list[Member]
+    history: list[HistoryRow]
+    pending: list[Candidate]
+    wall_seconds: float
+
+
+class RunStore:
+    """The files of one evolution run directory (``evo.run.layout.RunLayout``)."""
+
+    def __init__(self, root: Path) -> None:
+        self.layout = RunLayout(root)
+
+    @property
+    def root(self) -> Path:
+        """The run directory."""
+        return self.layout.root
+
+    def prepare(self) -> None:
+        """Make the run directory and its ``robots/`` folder, if missing."""
+        self.layout.robots.mkdir(parents=True, exist_ok=True)
+
+    # ---- robots ---------------------------------------------------------------------------
+    def save_robot(self, name: str, robot: Robot) -> Path:
+        """Write ``robots/<name>.json``."""
+        return save_robot(robot, self.layout.robot(name))
+
+    def load_robot(self, name: str) -> Robot:
+        """Read ``robots/<name>.json``.
+
+        Raises:
+            RobotFileError, InvalidRobotError: The file is missing or not a valid robot.
+        """
+        return load_robot(self.layout.robot(name))
+
+    # ---- the state ------------------------------------------------------------------------
+    def has_state(self) -> bool:
+        """Whether the run has saved a state."""
+        return self.layout.state.exists()
+
+    def save(self, state: SavedState, summary: RunSummary) -> None:
+        """Write the state first (atomically), then the files derived from it."""
+        population = [{"name": m.name, "fitness": m.fitness} for m in state.population]
+        self.write_json(self.layout.state, {
+            "version": STATE_VERSION,
+            "seed": state.seed,
+            "next_birth": state.next_birth,
+            "rng": state.rng,
+            "population": population,
+            "history": [row.record() for row in state.history],
+            "pending": [asdict(t) for t in state.pending],
+            "wall_seconds": state.wall_seconds,
+        })
+        if state.history:
+            write_history(self.layout.history, state.history)
+        self.write_json(self.layout.population, {"population": population})
+        write_run_summary(self.layout.summary, summary)
+
+    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
+        """Write one of the run's JSON files atomically (``evo.run.files.write_json``)."""
+        return files.write_json(path, data)
+
+    def load(self) -> SavedState:
+        """Read and check ``state.json`` and the files it refers to, writing nothing.
+
+        Checked: the state parses, has this version, its RNG state loads, every birth up
+        to ``next_birth`` is either in the history or in flight (once), every robot it
+        names is a valid file in ``robots/``, the population's members are in the
+        history, and ``history.csv`` (derived from the state, and rebuilt from it) holds
+        no row the state does not.
+
+        Raises:
+            ValueError: Naming the file and what is wrong with it.
+        """
+        path = self.layout.state
+        state = self._read_state()
+        try:
+            np.random.default_rng().bit_generator.state = state["rng"]
+            history = [HistoryRow.from_record(row) for row in state["history"]]
+            pending = [Candidate(**{**t, "parents": tuple(t["parents"])})
+                       for t in state["pending"]]
+            fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
+            seed, next_birth = int(state["seed"]), int(state["next_birth"])
+            wall_seconds = float(state["wall_seconds"])
+        except (KeyError, TypeError, ValueError, AttributeError) as err:
+            raise ValueError(f"{path}: unreadable run state ({err})") from None
+        births = sorted([r.birth for r in history] + [t.birth for t in pending])
+        names = [r.name for r in history] + [t.name for t in pending]
+        if births != list(range(next_birth)):
+            raise ValueError(f"{path}: inconsistent run state (births {births} recorded or "
+                             f"in flight, expected each of 0..{next_birth - 1} once)")
+        if not set(fitness) <= set(names):
+            raise ValueError(f"{path}: inconsistent run state (population members "
+                             f"{sorted(set(fitness) - set(names))} are not in its history)")
+        robots = {}
+        for name in dict.fromkeys(names):
+            try:
+                robots[name] = self.load_robot(name)
+            except (RobotFileError, InvalidRobotError) as err:
+                raise ValueError(f"{path} needs robot {name}: {err}") from None
+        self._check_history_csv([r.name for r in history])
+        population = [Member(name, robots[name], f) for name, f in fitness.items()]
+        return SavedState(seed, next_birth, state["rng"], population, history, pending,
+                          wall_seconds)
+
+    def _read_state(self) -> dict[str, Any]:
+        """``state.json`` parsed, of this version."""
+        path = self.layout.state
+        try:
+            state = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"{path}: no saved state; is this an evo run directory?") from None
+        except (OSError, ValueError) as err:
+            raise ValueError(f"{path}: unreadable run state ({err})") from None
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            version = state.get("version") if isinstance(state, dict) else None
+            raise ValueError(f"{path}: unreadable run state (state version {version!r}, "
+                             f"expected {STATE_VERSION})")
+        return state
+
+    def _check_history_csv(self, names: list[str]) -> None:
+        """``history.csv`` may lag the state by a row, never lead it or disagree with it."""
+        path = self.layout.history
+        if not path.exists():
+            return
+        try:
+            rows = read_history(path)["name"].astype(str).tolist()
+        except (OSError, ValueError, KeyError) as err:
+            raise ValueError(f"{path}: unreadable ({err}); it is rebuilt from state.json if "
+                             "you move it away") from None
+        if rows != names[: len(rows)]:
+            raise ValueError(f"{path}: its rows do not match state.json's history (is it "
+                             "from another run?); it is rebuilt from state.json if you move "
+                             "it away")
+
+    # ---- what an earlier run left -------------------------------------------------------
+    def evaluated_before(self) -> bool:
+        """Whether the directory holds results of evaluations (a history or policies)."""
+        return self.layout.history.exists() or self.layout.policy_count() > 0
+
+    def leftovers(self) -> list[str]:
+        """What the directory holds of an earlier run, in words (empty: nothing)."""
+        found = []
+        if self.layout.history.is_file():
+            rows = max(0, len(self.layout.history.read_text().splitlines()) - 1)
+            found.append(f"{self.layout.history.name} with {rows} row(s)")
+        policies = self.layout.policy_count()
+        if policies:
+            found.append(f"{self.layout.evals.name}/ with {policies} trained "
+                         f"polic{'y' if policies == 1 else 'ies'}")
+        if self.layout.robots.is_dir():
+            found.append(f"{self.layout.robots.name}/ with "
+                         f"{len(self.layout.robot_names())} robot(s)")
+        return found
