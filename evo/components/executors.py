@@ -280,7 +280,9 @@ class LocalExecutor:
         return self._resubmit.submit(fn, args)
 
     def _launch(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[Future[Any], int]:
-        with self._lock:
+        with self._lock:  # a resubmission racing terminate() starts no pool after it
+            if self._resubmit.closing:
+                raise RuntimeError("the executor was stopped")
             token, pool = next(self._tokens), self._get()
             self._pool_of[token] = pool
             return pool.submit(_run_attempt, token, fn, *args), token
