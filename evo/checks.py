@@ -2,10 +2,19 @@
 
 Each raises one ``ValueError`` that names the field, the bound and the value found
 (``"epochs must be >= 1, got 0"``); :func:`evo.config.typed` prefixes it with the
-config key, so a user sees ``learner: epochs must be >= 1, got 0``.
+config key, so a user sees ``learner: epochs must be >= 1, got 0``. A field holding a
+tuple of numbers (``friction``, ``hidden``) is checked element by element.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+def _values(value: object) -> Iterable[float]:
+    if isinstance(value, tuple | list):
+        return value
+    return (value,)  # type: ignore[return-value]
 
 
 def at_least(obj: object, minimum: float, *names: str, note: str = "") -> None:
@@ -19,7 +28,7 @@ def at_least(obj: object, minimum: float, *names: str, note: str = "") -> None:
     """
     for name in names:
         value = getattr(obj, name)
-        if value < minimum:
+        if any(v < minimum for v in _values(value)):
             raise ValueError(f"{name} must be >= {minimum:g}{note}, got {value}")
 
 
@@ -27,5 +36,13 @@ def positive(obj: object, *names: str) -> None:
     """Raise unless every field ``names`` of ``obj`` is ``> 0``."""
     for name in names:
         value = getattr(obj, name)
-        if value <= 0:
+        if any(v <= 0 for v in _values(value)):
             raise ValueError(f"{name} must be positive, got {value}")
+
+
+def within(obj: object, low: float, high: float, *names: str, note: str = "") -> None:
+    """Raise unless every field ``names`` of ``obj`` lies in ``[low, high]``."""
+    for name in names:
+        value = getattr(obj, name)
+        if any(not low <= v <= high for v in _values(value)):
+            raise ValueError(f"{name} must be in [{low:g}, {high:g}]{note}, got {value}")

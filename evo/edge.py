@@ -100,8 +100,17 @@ def warn_if_failures_cannot_end(
 ) -> None:
     """Warn when ``budget`` gives each arena fewer control steps than an episode's limit:
     then only successful episodes end, and fitness (the mean return of the episodes that
-    ended) would count successes alone."""
+    ended) would count successes alone.
+
+    Raises:
+        ConfigError: When the budget gives an arena not even one control step.
+    """
     per_arena = budget // learner.num_envs
+    if per_arena < 1:
+        raise ConfigError(
+            f"{budget_key}: {budget:,} env steps give each of learner.num_envs="
+            f"{learner.num_envs} arenas no control step; a budget needs at least "
+            f"{learner.num_envs} env steps (one per arena)")
     if per_arena < env.task.t_max:
         warnings.warn(
             f"{budget_key}: {budget:,} env steps over learner.num_envs={learner.num_envs} "

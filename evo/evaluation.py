@@ -14,12 +14,11 @@ import math
 import time
 import traceback
 from concurrent.futures import Future
-from concurrent.futures.process import BrokenProcessPool
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from evo.components.executors import EvalExecutor
+from evo.components.executors import EvalExecutor, EvaluationLost
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
@@ -102,13 +101,14 @@ class Outcome:
 
 
 def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
-    """The outcome of a finished ``evaluate`` future; a crashed worker (the pool is
-    restarted) or an exception outside ``evaluate`` becomes an outcome with the error."""
+    """The outcome of a finished ``evaluate`` future; an evaluation lost on every attempt
+    (its worker or node died each time) or an exception outside ``evaluate`` becomes an
+    outcome with the error, in one line."""
     try:
         return future.result()
-    except BrokenProcessPool:
+    except EvaluationLost as err:
         executor.restart()
-        return Outcome(candidate.birth, candidate.name, error="the worker process died")
+        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {err}")
     except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
         return Outcome(candidate.birth, candidate.name, error=f"{type(err).__name__}: {err}")
 

@@ -6,8 +6,12 @@ or training, with the serial executor), so ``finally`` blocks run: the executor
 stops its workers, the recordings are closed, the lock is released. Code that must
 not be cut in two (appending a result to the state and saving it) runs inside
 :func:`critical`: a signal that arrives there is held back and raised when the block
-ends, so the saved state is always one the run can resume from. A second signal
-while shutting down is ignored.
+ends, so the saved state is always one the run can resume from. A critical block is
+meant to be short: one still running :data:`HOLD_S` seconds after the signal came is
+cut there (a timer raises the interrupt anyway), so a run stops within seconds
+wherever it is, even in long work wrongly inside a critical block (every state file
+is written atomically, so a cut block still leaves a state the run resumes from). A
+second signal while shutting down is ignored.
 
 **Workers.** :func:`worker_init` makes an evaluation worker (a process of the local
 pool) end with its parent: on Linux the kernel sends it SIGTERM when the parent dies
@@ -35,6 +39,9 @@ T = TypeVar("T")
 
 EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}
 """Exit code of a run ended by each signal (128 + the signal number)."""
+
+HOLD_S = 3.0
+"""Longest a critical block holds back a signal, seconds."""
 
 
 class Interrupted(BaseException):  # noqa: N818 - like KeyboardInterrupt, not an error
@@ -71,11 +78,24 @@ def raised() -> Interrupted | None:
     return None if _raised is None else Interrupted(_raised)
 
 
+def _hold(signum: int) -> None:
+    """Hold ``signum`` back until the critical block ends, or :data:`HOLD_S` at most."""
+    if not _held:
+        signal.setitimer(signal.ITIMER_REAL, HOLD_S)
+    _held.append(signum)
+
+
+def _on_alarm(signum: int, frame: FrameType | None) -> None:
+    """A critical block outlived :data:`HOLD_S` with a signal held: raise it now."""
+    if _held and _raised is None:
+        raise _interrupt(_held[0])
+
+
 def _on_signal(signum: int, frame: FrameType | None) -> None:
     if _raised is not None:
         return
     if _depth:
-        _held.append(signum)
+        _hold(signum)
         return
     raise _interrupt(signum)
 
@@ -85,10 +105,12 @@ def handle_signals() -> Iterator[None]:
     """Raise :class:`Interrupted` on SIGINT and SIGTERM inside the block (main thread)."""
     global _raised
     before = {s: signal.signal(s, _on_signal) for s in EXIT_CODES}
+    before[signal.SIGALRM] = signal.signal(signal.SIGALRM, _on_alarm)
     _raised = None
     try:
         yield
     finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
         for s, handler in before.items():
             signal.signal(s, handler)
         _held.clear()
@@ -104,10 +126,12 @@ def critical() -> Iterator[None]:
         yield
     finally:
         _depth -= 1
-    if not _depth and _held and _raised is None:
+    if not _depth and _held:
+        signal.setitimer(signal.ITIMER_REAL, 0)
         signum = _held[0]
         _held.clear()
-        raise _interrupt(signum)
+        if _raised is None:
+            raise _interrupt(signum)
 
 
 # ---------------------------------------------------------------- workers
@@ -117,7 +141,7 @@ _busy = False  # this worker is inside an evaluation
 
 def _worker_signal(signum: int, frame: FrameType | None) -> None:
     if _busy and _depth:
-        _held.append(signum)
+        _hold(signum)
         return
     if _busy:
         raise _interrupt(signum)
@@ -128,6 +152,7 @@ def worker_init(parent: int) -> None:
     """Tie this worker process to its parent, PID ``parent`` (see the module docstring)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _worker_signal)
+    signal.signal(signal.SIGALRM, _on_alarm)
     try:  # Linux: SIGTERM from the kernel the moment the parent dies
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from evo.checks import at_least, positive
+from evo.checks import at_least, positive, within
 
 
 @dataclass
@@ -28,3 +28,18 @@ def test_positive_rejects_zero_and_below() -> None:
     positive(Fields(), "a")
     with pytest.raises(ValueError, match=r"^b must be positive, got 0.0$"):
         positive(Fields(), "a", "b")
+
+
+def test_within_and_tuples_name_the_field_and_the_whole_value() -> None:
+    within(Fields(), -2, 1, "a", "b", "c")
+    with pytest.raises(ValueError, match=r"^a must be in \[-1, 0.5\] \(note\), got 1.0$"):
+        within(Fields(), -1, 0.5, "b", "a", note=" (note)")
+    with pytest.raises(ValueError, match=r"^t must be >= 0, got \(1.0, -0.5\)$"):
+        at_least(Tuples(), 0, "t")
+    with pytest.raises(ValueError, match=r"^t must be positive, got \(1.0, -0.5\)$"):
+        positive(Tuples(), "t")
+
+
+@dataclass
+class Tuples:
+    t: tuple[float, ...] = (1.0, -0.5)

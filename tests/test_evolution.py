@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from evo.components.executors import LocalExecutor, SerialExecutor
+from evo.components.executors import SerialExecutor
 from evo.components.ga import (
     BudgetSchedule,
     Evolve,
@@ -68,14 +68,6 @@ def fake_evaluate(candidate: Candidate, job: Job) -> Outcome:
         episodes=3,
         wall_seconds=0.001,
     )
-
-
-def dies_on_birth_3(candidate: Candidate, job: Job) -> Outcome:
-    """The evaluation of birth 3 kills its worker process (run in a process pool)."""
-    if candidate.birth == 3:
-        os._exit(13)
-    time.sleep(0.05)
-    return fake_evaluate(candidate, job)
 
 
 class Crash(BaseException):
@@ -264,17 +256,7 @@ def test_an_error_inside_training_is_recorded_with_its_traceback(tmp_path: Path)
     assert summary.failed == 3 and summary.best_robot is None and summary.complete
 
 
-def test_a_dead_worker_is_recorded_and_the_run_goes_on(tmp_path: Path) -> None:
-    run = make_evolution(tmp_path, population=3, budget=7, executor=LocalExecutor(workers=1),
-                         evaluate=dies_on_birth_3)
-    summary = run.run()
-    history = read_history(tmp_path)
-    assert sorted(history["birth"]) == list(range(7))
-    failed = history[history["error"] != ""]
-    assert list(failed["birth"]) == [3], "only the evaluation that killed its worker fails"
-    assert list(failed["error"]) == ["the worker process died"]
-    assert summary.failed == 1 and summary.complete
-    check_steady_state(tmp_path, 3, 7, seed=3)
+# A worker that dies: tests/test_lost_work.py.
 
 
 # ---- resume after a crash at any point -----------------------------------------------------

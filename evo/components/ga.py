@@ -267,6 +267,7 @@ class GAConfig:
                 f"robot_budget ({self.robot_budget}) must be >= population_size "
                 f"({self.population_size})"
             )
+        at_least(self, 1, "crossover_tries", "parent_tries")
         at_least(self, 0, "eval_timeout_s", note=" (0 = none)")
         if self.structure not in STRUCTURES:
             raise ValueError(f"structure: expected E (evolve) or R (random), got "

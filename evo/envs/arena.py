@@ -104,8 +104,16 @@ class ArenaParams:
         at_least(self, 0, "n_rocks")
         if self.n_rocks and not self.rock_types:
             raise ValueError("rock_types must list at least one rock when n_rocks > 0")
-        if self.start_clearance < 0 or self.target_clearance < 0:
-            raise ValueError("start_clearance and target_clearance must be >= 0")
+        at_least(self, 0, "start_clearance", "target_clearance")
+        if self.rock_spread >= self.side / 2:
+            raise ValueError(f"rock_spread ({self.rock_spread} m) must be below half the "
+                             f"arena side ({self.side / 2:g} m)")
+        if self.n_rocks and self.rock_footprint > self.free_area:
+            raise ValueError(
+                f"n_rocks ({self.n_rocks}) do not fit: their footprints cover "
+                f"{self.rock_footprint:.3g} m^2, the free area within rock_spread of the "
+                f"target is {self.free_area:.3g} m^2 (at most "
+                f"{self.most_rocks} rocks of these types)")
 
     @classmethod
     def clean(cls) -> ArenaParams:
@@ -116,6 +124,34 @@ class ArenaParams:
     def cluttered(cls) -> ArenaParams:
         """Floor, walls and 40 rocks around the target; settled rocks sleep."""
         return cls(n_rocks=40, sleep=True)
+
+    @property
+    def free_area(self) -> float:
+        """Where rocks may lie: the disc of radius ``rock_spread`` around the target
+        without the target's clearance, m^2."""
+        return math.pi * (self.rock_spread**2 - min(self.target_clearance, self.rock_spread)**2)
+
+    @property
+    def rock_footprint(self) -> float:
+        """Floor area the rocks' bounding circles cover, m^2 (O(len(rock_types)))."""
+        if not self.rock_types:
+            return 0.0
+        areas = [math.pi * rock.radius**2 for rock in self.rock_types]
+        whole, part = divmod(self.n_rocks, len(areas))
+        return whole * sum(areas) + sum(areas[:part])
+
+    @property
+    def most_rocks(self) -> int:
+        """The largest ``n_rocks`` whose footprint fits the free area."""
+        areas = [math.pi * rock.radius**2 for rock in self.rock_types]
+        per_round = sum(areas)
+        n = len(areas) * int(self.free_area // per_round)
+        covered = (n // len(areas)) * per_round
+        for area in areas:
+            if covered + area > self.free_area:
+                break
+            covered, n = covered + area, n + 1
+        return n
 
     @property
     def rocks(self) -> tuple[RockType, ...]:

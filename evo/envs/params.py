@@ -82,3 +82,9 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         at_least(self, 1, "nthread")
+        inside = self.arena.side / 2 - self.arena.wall_thickness
+        if self.task.target_max >= inside:
+            raise ValueError(
+                f"task: target_max ({self.task.target_max} m) must be below half the arena "
+                f"side less a wall, {inside:g} m (arena.side = {self.arena.side} m): the "
+                "target lies inside the walls")

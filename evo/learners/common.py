@@ -21,7 +21,7 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
-from evo.checks import at_least
+from evo.checks import at_least, within
 from evo.envs.params import action_size
 from evo.robot.tree import Robot
 
@@ -85,6 +85,12 @@ class LearnerConfig:
             if not ok:
                 raise ValueError(f"{key} must be {expected}, got {getattr(self, key)}")
         at_least(self, 0, "eval_episodes")
+        within(self, -10, 2, "init_log_std", note=" (a standard deviation of e^-10 to e^2)")
+        if self.minibatch_size > self.frames_per_batch:
+            raise ValueError(
+                f"minibatch_size ({self.minibatch_size}) must be <= the batch, num_envs x "
+                f"rollout_steps = {self.num_envs} x {self.rollout_steps} = "
+                f"{self.frames_per_batch} env steps")
         if not self.hidden or min(self.hidden) < 1:
             raise ValueError(f"hidden must list positive layer widths, got {self.hidden}")
 

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 
-from evo.checks import positive
+from evo.checks import at_least, positive
 from evo.robot.tree import (
     FACE_NORMALS,
     IntMatrix,
@@ -115,14 +115,17 @@ class PhysicsParams:
         return (s**2 + (s / 2 + self.module_gap) ** 2) / (2 * s)
 
     def __post_init__(self) -> None:
+        positive(self, "module_size", "brain_mass", "module_mass", "wheel_mass", "wheel_width",
+                 "motor_max_speed", "motor_max_torque", "motor_kv", "pivot_max_torque",
+                 "pivot_kp", "timestep")
+        at_least(self, 0, "module_gap", "friction", "body_damping", "motor_armature",
+                 "passive_wheel_damping", "passive_wheel_armature", "pivot_kd", "pivot_armature")
         half, top = self.module_size / 2, self.max_wheel_radius
         if not half < self.wheel_radius < top:
             raise ValueError(
                 f"wheel_radius must lie between module_size/2 ({half:.4f} m) and "
                 f"{top:.4f} m (wheels in diagonal cells would overlap), got {self.wheel_radius}"
             )
-        positive(self, "module_size", "brain_mass", "module_mass", "wheel_mass", "wheel_width",
-                 "motor_max_speed", "motor_max_torque", "pivot_max_torque", "timestep")
         if not 0 < self.pivot_range <= 90:
             raise ValueError(f"pivot_range must be in (0, 90] degrees, got {self.pivot_range}")
 

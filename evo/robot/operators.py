@@ -60,7 +60,7 @@ class GeneratorParams:
     max_tries: int = 1000
 
     def __post_init__(self) -> None:
-        at_least(self, 1, "max_depth")
+        at_least(self, 1, "max_depth", "max_tries")
         for key in ("p_empty", "p_passive_wheels"):
             value = getattr(self, key)
             if not 0.0 <= value <= 1.0:
