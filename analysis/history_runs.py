@@ -16,7 +16,6 @@ drawn from fitness alone, can be regenerated from what is committed:
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
@@ -37,6 +36,8 @@ from analysis.load import (
     run_method,
 )
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
+from evo.run.layout import RunLayout
+from evo.run.records import read_run_summary
 
 SEED_IN_NAME = re.compile(r"seed(\d+)$")
 
@@ -47,7 +48,7 @@ def run_setting(run_dir: Path) -> tuple[int, int]:
     Raises:
         RunDirectoryError: If there is no ``config.yaml`` and the name gives no seed.
     """
-    if (run_dir / "config.yaml").is_file():
+    if RunLayout(run_dir).config.is_file():
         config = read_config(run_dir)
         population = config.get("ga", {}).get("population_size", DEFAULT_POPULATION)
         return int(config.get("seed", 0)), int(population)
@@ -59,14 +60,11 @@ def run_setting(run_dir: Path) -> tuple[int, int]:
 
 
 def _complete(run_dir: Path) -> bool:
-    path = run_dir / "summary.json"
-    if not path.is_file():
-        return False
     try:
-        summary = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as err:
-        raise RunDirectoryError(f"{path}: not readable JSON ({err})") from None
-    return bool(isinstance(summary, dict) and summary.get("complete", False))
+        summary = read_run_summary(RunLayout(run_dir).summary)
+    except ValueError as err:
+        raise RunDirectoryError(str(err)) from None
+    return summary is not None and summary.complete
 
 
 def load_histories(paths: PathsLike, first: int | None = None) -> Runs:

@@ -162,11 +162,11 @@ def test_random_rejects_bad_arguments(tmp_path: Path, args: tuple[str, ...], mes
 
 
 def test_random_gives_up_when_the_design_space_is_too_small(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     only_one = load_robot(FOUR_WHEELER)
-    monkeypatch.setattr(robot_cli, "random_robot", lambda rng, params: only_one)
-    code = robot_cli.main(["random", "--count", "3", "--seed", "0", "--out", str(tmp_path)])
+    code = robot_cli.main(["random", "--count", "3", "--seed", "0", "--out", str(tmp_path)],
+                          draw=lambda rng, params: only_one)
     assert code == 2
     assert "random: only 1 distinct robots in 160 draws" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.json"))

@@ -23,6 +23,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -37,6 +38,7 @@ from test_evolution import (
 )
 
 from evo.record import mcap_file, rrd
+from evo.robot.tree import Robot
 from evo.run.files import RunDirectoryBusy, RunLock, is_locked
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -168,7 +170,7 @@ def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
 
 
 def test_a_signal_that_cleanup_turns_into_another_error_is_not_a_failed_robot(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path,
 ) -> None:
     """A real SIGINT during training, which library code unwinding from it replaces with an
     ordinary error (as tensordict's ``__bool__`` can in a ``finally``), still stops the
@@ -177,21 +179,27 @@ def test_a_signal_that_cleanup_turns_into_another_error_is_not_a_failed_robot(
 
     from evo.evaluation import Job, evaluate
     from evo.interrupt import Interrupted, handle_signals
+    from evo.learners import get_learner
     from evo.robot.builder import PhysicsParams
 
-    original = mcap_file.McapRecorder.curve
+    ppo = get_learner(TINY_LEARNER)
 
-    def converting(*args: object, **kwargs: object) -> object:
-        try:
-            os.kill(os.getpid(), signal.SIGINT)
-            return original(*args, **kwargs)  # type: ignore[arg-type]
-        finally:
-            raise RuntimeError("Converting a tensordict to boolean value is not permitted")
+    def converting(robot: Robot, **kwargs: Any) -> Any:
+        """The real learner, whose curve callback is unwound by such a library ``finally``."""
+        on_curve = kwargs.pop("on_curve")
 
-    monkeypatch.setattr(mcap_file.McapRecorder, "curve", converting)
+        def signalled(row: dict[str, float]) -> bool:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                return bool(on_curve(row))
+            finally:
+                raise RuntimeError("Converting a tensordict to boolean value is not permitted")
+
+        return ppo(robot, on_curve=signalled, **kwargs)
+
     with handle_signals(), pytest.raises(Interrupted) as stop:
         evaluate(real_candidate(float("-inf")),
-                 Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
+                 Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)), learner=converting)
     assert stop.value.signum == signal.SIGINT
     assert isinstance(stop.value.__cause__, RuntimeError)
 

@@ -23,6 +23,7 @@ import argparse
 import os
 import sys
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,9 @@ from evo.robot.tree import ModuleType, Robot
 from evo.robot.validate import InvalidRobotError
 
 EXIT_OK, EXIT_INVALID, EXIT_UNREADABLE = 0, 1, 2
+
+RobotDraw = Callable[[np.random.Generator, GeneratorParams], Robot]
+"""How ``random`` draws one robot (:func:`evo.robot.operators.random_robot`)."""
 
 
 def _validate(args: argparse.Namespace) -> int:
@@ -60,7 +64,7 @@ def _write(robots: Sequence[Robot], out: Path) -> None:
         print(path)
 
 
-def _random(args: argparse.Namespace) -> int:
+def _random(args: argparse.Namespace, draw: RobotDraw = random_robot) -> int:
     params = GeneratorParams(max_depth=args.max_depth, p_empty=args.p_empty)
     rng = np.random.default_rng(args.seed)
     # Files are named by hash, so a robot drawn twice would overwrite itself and leave
@@ -70,7 +74,7 @@ def _random(args: argparse.Namespace) -> int:
     for _ in range(draws):
         if len(robots) == args.count:
             break
-        robot = random_robot(rng, params)
+        robot = draw(rng, params)
         robots.setdefault(robot.hash, robot)
     if len(robots) < args.count:
         raise OperatorError(
@@ -164,7 +168,7 @@ def _render(args: argparse.Namespace) -> int:
 _DEFAULTS = GeneratorParams()
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(draw: RobotDraw = random_robot) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m evo.robot",
         description=__doc__,
@@ -180,7 +184,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--max-depth", type=int, default=_DEFAULTS.max_depth)
     p.add_argument("--p-empty", type=float, default=_DEFAULTS.p_empty)
-    p.set_defaults(run=_random)
+    p.set_defaults(run=partial(_random, draw=draw))
     p = verbs.add_parser("crossover", help="write the valid offspring of two robots")
     p.add_argument("a")
     p.add_argument("b")
@@ -207,9 +211,14 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run one verb and return its exit code."""
-    args = _parser().parse_args(argv)
+def main(argv: Sequence[str] | None = None, draw: RobotDraw = random_robot) -> int:
+    """Run one verb and return its exit code.
+
+    Args:
+        argv: The command line after ``python -m evo.robot``; None reads ``sys.argv``.
+        draw: How ``random`` draws one robot.
+    """
+    args = _parser(draw).parse_args(argv)
     if getattr(args, "count", 1) < 0:
         print("random: --count must be >= 0", file=sys.stderr)
         return EXIT_UNREADABLE
