@@ -22,7 +22,11 @@
 #
 # ```bash
 # EVO_RUNS=outputs/ablation/<date> jupyter execute analysis/ablation.ipynb
+# jupyter lab analysis/     # then set runs_path below, or start it with EVO_RUNS=... set
 # ```
+#
+# Relative paths are read from the directory `jupyter` was started in (the repository
+# root above), not from `analysis/` where the kernel runs.
 #
 # Every number comes from the library functions the report uses
 # (`analysis.load`, `analysis.report`, `analysis.stats`, `analysis.plots`).
@@ -35,7 +39,7 @@ from pathlib import Path
 from IPython.display import Image, Markdown, display
 
 from analysis.bootstrap import Resampling
-from analysis.load import load_runs
+from analysis.load import launch_paths, load_runs
 from analysis.nested_report import nested_markdown
 from analysis.report import ablation_figures, ablation_tables, tests_markdown
 
@@ -49,7 +53,7 @@ resamples = int(os.environ.get("EVO_RESAMPLES", "2000"))  # per interval (--resa
 # ## The runs
 
 # %%
-runs = load_runs(runs_path.split(os.pathsep))
+runs = load_runs(launch_paths(runs_path))
 for note in runs.notes:
     display(Markdown(f"- {note}"))
 display(runs.runs.drop(columns="path"))
@@ -96,7 +100,8 @@ display(tables.paper)
 # ## The paper's figures
 
 # %%
-folder = Path(figures_dir or tempfile.mkdtemp(prefix="ablation-"))
+folder = (launch_paths(figures_dir)[0] if figures_dir
+          else Path(tempfile.mkdtemp(prefix="ablation-")))
 figures = ablation_figures(runs.robots, runs.curves, folder,
                            population_size=runs.population_size)
 for stem in figures:

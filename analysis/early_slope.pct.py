@@ -24,7 +24,11 @@
 #
 # ```bash
 # EVO_RUNS=outputs/ablation/<date> jupyter execute analysis/early_slope.ipynb
+# jupyter lab analysis/     # then set runs_path below, or start it with EVO_RUNS=... set
 # ```
+#
+# Relative paths are read from the directory `jupyter` was started in (the repository
+# root above), not from `analysis/` where the kernel runs.
 
 # %%
 import os
@@ -42,7 +46,7 @@ from analysis.early_slope_report import (
     early_slope_study,
     recall_table,
 )
-from analysis.load import load_retrained, load_runs
+from analysis.load import launch_paths, load_retrained, load_runs
 
 # %% tags=["parameters"]
 runs_path = os.environ.get("EVO_RUNS", "outputs/ablation")  # run dirs, os.pathsep-separated
@@ -55,8 +59,8 @@ resamples = int(os.environ.get("EVO_RESAMPLES", "2000"))  # per interval (--resa
 # ## The runs and the robots studied
 
 # %%
-runs = load_runs(runs_path.split(os.pathsep))
-retrained = load_retrained(retrained_path.split(os.pathsep)) if retrained_path else None
+runs = load_runs(launch_paths(runs_path))
+retrained = load_retrained(launch_paths(retrained_path)) if retrained_path else None
 study = early_slope_study(runs.robots, runs.curves, Resampling.seeded(seed, resamples),
                           population_size=runs.population_sizes, retrained=retrained)
 for note in [*runs.notes, *study.notes]:
@@ -96,7 +100,8 @@ display(Markdown("### reject below the population minimum"),
 # ## Figures
 
 # %%
-folder = Path(figures_dir or tempfile.mkdtemp(prefix="early-slope-"))
+folder = (launch_paths(figures_dir)[0] if figures_dir
+          else Path(tempfile.mkdtemp(prefix="early-slope-")))
 figures = early_slope_figures(study, folder)
 for stem in figures:
     display(Markdown(f"### {stem}"), Image(filename=folder / f"{stem}.png"))

@@ -31,7 +31,8 @@ every column the recording holds (``episode_length``, ``reward/...``, ``loss/...
 ``wall_seconds``, ...).
 
 :func:`load_retrained` reads retrained structures for the noise ceiling
-(:func:`analysis.noise_ceiling.noise_ceiling`).
+(:func:`analysis.noise_ceiling.noise_ceiling`); :func:`launch_paths` reads the paths a
+notebook is given (``EVO_RUNS``) as the shell that launched it means them.
 """
 
 from __future__ import annotations
@@ -148,6 +149,28 @@ def find_run_dirs(paths: PathsLike) -> list[Path]:
             )
         found.update((p.resolve(), None) for p in inside)
     return list(found)
+
+
+def launch_paths(text: str, launched_from: str | os.PathLike[str] | None = None) -> list[Path]:
+    """The paths in ``text`` (``os.pathsep``-separated, as in ``EVO_RUNS``), relative ones
+    resolved against the directory the user launched from.
+
+    A notebook's kernel runs in the notebook's folder (``analysis/``), not where
+    ``jupyter execute`` or ``jupyter lab`` was typed, so a relative path taken as it is
+    would point into ``analysis/``. The kernel inherits the launching shell's ``PWD``;
+    relative paths are joined to it (to the working directory where there is none), so
+    ``EVO_RUNS=outputs/x`` means what it means to the shell.
+
+    Args:
+        text: Paths separated by ``os.pathsep``; empty parts are skipped; ``~`` expands.
+        launched_from: The directory relative paths start from (default: ``PWD``).
+
+    Returns:
+        The paths, absolute where they were relative.
+    """
+    base = Path(launched_from or os.environ.get("PWD") or os.getcwd())
+    paths = [Path(part).expanduser() for part in text.split(os.pathsep) if part.strip()]
+    return [path if path.is_absolute() else base / path for path in paths]
 
 
 def _as_paths(paths: PathsLike) -> list[Path]:

@@ -1,8 +1,10 @@
-"""The analysis end to end on a small real ablation: loading, both reports, both notebooks.
+"""The analysis end to end on a small real ablation: loading, both reports, and every
+analysis command of the README as written, both notebooks included, run from the root
+with a relative ``EVO_RUNS`` (``tests/readme_commands.py`` says how).
 
-One ablation is built per test session: the four methods as four tiny ``+exp=smoke``
-runs in subprocesses (``ga.structure`` and ``learner`` overrides), laid out as a Hydra
-multirun folder (``0/`` ... ``3/``). Everything else reads it.
+One ablation is built: the README's ``python evo/main.py +exp=ablation`` at a tiny size
+(``readme_commands.TINY_EVOLUTION``), a Hydra multirun folder of the four methods
+(``E+L_seed0/`` ...). Everything else reads it, the README's analysis commands included.
 """
 
 from __future__ import annotations
@@ -20,11 +22,13 @@ import nbformat
 import numpy as np
 import pandas as pd
 import pytest
-from nbclient import NotebookClient
+from omegaconf import OmegaConf
+from readme_commands import ANALYSIS, REPO, Command, Made, copy_of_the_root, group, run_first
+from readme_commands import run as run_command
 
 from analysis.bootstrap import Resampling
 from analysis.early_slope_report import write_early_slope_report
-from analysis.load import RunDirectoryError, load_runs
+from analysis.load import RunDirectoryError, launch_paths, load_runs
 from analysis.report import ablation_tables, write_report
 from analysis.synthetic import synthetic_robots
 from analysis.tables import CURVE_COLUMNS, METHODS, ROBOT_COLUMNS
@@ -32,39 +36,22 @@ from evo.record import read_curve
 
 pytestmark = pytest.mark.slow
 
-REPO = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-OVERRIDES: dict[str, list[str]] = {  # method -> its overrides (R+R, R+L, E+R, E+L)
-    "R+R": ["ga.structure=R", "learner=random"],
-    "R+L": ["ga.structure=R"],
-    "E+R": ["learner=random"],
-    "E+L": [],
-}
-TINY = [  # six robots of four to six short batches each, episodes that end in every batch
-    "executor=serial", "record.rerun=false", "env.task.t_max=40", "learner.rollout_steps=32",
-    "ga.population_size=3", "ga.robot_budget=6", "ga.schedule.initial=1024",
-    "ga.schedule.first=1024", "ga.schedule.last=1536",
-]
-RESAMPLES = "200"
 NOTEBOOKS = ("ablation", "early_slope")
+ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+RESAMPLES = "200"
 
 
-@pytest.fixture(scope="session")
-def ablation(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A multirun folder with one tiny run per method, subfolders ``0`` to ``3``."""
-    folder = tmp_path_factory.mktemp("ablation")
-    procs = [
-        subprocess.Popen(
-            [sys.executable, str(REPO / "evo" / "main.py"), "+exp=smoke",
-             f"hydra.run.dir={folder / str(i)}", *TINY, *overrides],
-            cwd=folder, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        )
-        for i, overrides in enumerate(OVERRIDES.values())
-    ]
-    for proc, method in zip(procs, OVERRIDES, strict=True):
-        output, _ = proc.communicate(timeout=300)
-        assert proc.returncode == 0, f"{method} run failed:\n{output[-3000:]}"
-    return folder
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> Made:
+    """The README's ``python evo/main.py +exp=ablation`` (tiny: ``TINY_EVOLUTION``), run
+    first in a copy of the repository root."""
+    return run_first(ANALYSIS, copy_of_the_root(tmp_path_factory.mktemp("root")))
+
+
+@pytest.fixture(scope="module")
+def ablation(made: Made) -> Path:
+    """Its multirun folder: one tiny run per method, ``<method>_seed0``."""
+    return made.runs["ablation"]
 
 
 def run_cli(module: str, *args: str) -> subprocess.CompletedProcess[str]:
@@ -89,9 +76,8 @@ def test_load_gives_one_row_per_history_row_and_the_mcap_curves(ablation: Path) 
     robots, curves = runs.robots, runs.curves
     assert list(robots.columns[: len(ROBOT_COLUMNS)]) == list(ROBOT_COLUMNS)
     assert list(curves.columns[: len(CURVE_COLUMNS)]) == list(CURVE_COLUMNS)
-    assert sorted(runs.runs["run"]) == ["0", "1", "2", "3"]
     assert dict(zip(runs.runs["run"], runs.runs["method"], strict=True)) == {
-        str(i): m for i, m in enumerate(OVERRIDES)}
+        f"{m}_seed0": m for m in METHODS}
     assert (robots["seed"] == 0).all() and runs.population_size == 3
     for run in runs.runs.itertuples():
         history = pd.read_csv(ablation / run.run / "history.csv", dtype={"parents": str})
@@ -127,7 +113,7 @@ def test_load_keeps_each_runs_first_robots_and_says_so(ablation: Path) -> None:
 def test_load_falls_back_to_the_csv_only_when_the_mcap_is_missing(
     ablation: Path, tmp_path: Path
 ) -> None:
-    run = shutil.copytree(ablation / "3", tmp_path / "E+L_seed0")
+    run = shutil.copytree(ablation / "E+L_seed0", tmp_path / "E+L_seed0")
     name = pd.read_csv(run / "history.csv")["name"].iloc[-1]
     expected = read_curve(run / "evals" / f"{name}.mcap")
     (run / "evals" / f"{name}.mcap").unlink()
@@ -148,7 +134,7 @@ def test_load_errors_name_the_directory_or_file(ablation: Path, tmp_path: Path) 
     (tmp_path / "empty").mkdir()
     with pytest.raises(RunDirectoryError, match="empty.*no history.csv"):
         load_runs(tmp_path / "empty")
-    run = shutil.copytree(ablation / "0", tmp_path / "broken")
+    run = shutil.copytree(ablation / "R+R_seed0", tmp_path / "broken")
     (run / "config.yaml").unlink()
     with pytest.raises(RunDirectoryError, match=r"broken/config.yaml"):
         load_runs(run)
@@ -170,8 +156,8 @@ def test_report_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path
         assert heading in text, heading
     assert "Missing: none" in text
     stems = {p.stem for p in linked_figures(text, out)}
-    expected = {"fitness_vs_RR", "best_so_far", *(f"evolution_{i}" for i in range(4)),
-                *(f"curves_{i}" for i in range(4))}
+    expected = {"fitness_vs_RR", "best_so_far", *(f"evolution_{m}_seed0" for m in METHODS),
+                *(f"curves_{m}_seed0" for m in METHODS)}
     assert stems == expected
     for path in linked_figures(text, out):
         assert_png(path)
@@ -180,7 +166,7 @@ def test_report_cli_writes_every_table_and_figure(ablation: Path, tmp_path: Path
 
 
 def test_report_lists_missing_methods_instead_of_failing(ablation: Path, tmp_path: Path) -> None:
-    report = write_report(load_runs([ablation / "1", ablation / "3"]), tmp_path,
+    report = write_report(load_runs([ablation / "R+L_seed0", ablation / "E+L_seed0"]), tmp_path,
                           resampling=Resampling.seeded(0, 100))
     text = report.read_text()
     assert "Missing: R+R, E+R." in text
@@ -241,7 +227,7 @@ def test_early_slope_cli_writes_every_table_and_figure(ablation: Path, tmp_path:
 def test_early_slope_noise_ceiling_from_retrained_structures(
     ablation: Path, tmp_path: Path
 ) -> None:
-    robots = load_runs([ablation / "1", ablation / "3"]).robots
+    robots = load_runs([ablation / "R+L_seed0", ablation / "E+L_seed0"]).robots
     rng = np.random.default_rng(0)
     for i, robot in enumerate(robots.itertuples()):  # a second training, slightly noisy
         train = tmp_path / "retrained" / f"{i}"
@@ -249,7 +235,8 @@ def test_early_slope_noise_ceiling_from_retrained_structures(
         fitness = robot.fitness + 1e-4 * rng.normal()
         (train / "summary.json").write_text(json.dumps(
             dict(robot=robot.name, seed=7, fitness=fitness, env_steps=int(robot.budget))))
-    report = write_early_slope_report(load_runs([ablation / "1", ablation / "3"]), tmp_path / "out",
+    runs = load_runs([ablation / "R+L_seed0", ablation / "E+L_seed0"])
+    report = write_early_slope_report(runs, tmp_path / "out",
                                       retrained=[tmp_path / "retrained"],
                                       resampling=Resampling.seeded(0, 100))
     text = report.read_text()
@@ -257,28 +244,40 @@ def test_early_slope_noise_ceiling_from_retrained_structures(
     assert re.search(r"\(\d+ structures, 2 seeds\)", text)
 
 
-# ---------------------------------------------------------------- notebooks
+# ---------------------------------------------------------------- the README's commands
+
+
+def test_the_ablation_is_a_multirun_of_the_four_methods(made: Made) -> None:
+    sweep_dir = made.runs["ablation"]
+    jobs = sorted(p.name for p in sweep_dir.iterdir() if p.is_dir())
+    assert jobs == sorted(f"{method}_seed0" for method in METHODS), jobs
+    for job in jobs:
+        summary = json.loads((sweep_dir / job / "summary.json").read_text())
+        assert summary["method"] == job.split("_seed")[0]
+        assert summary["complete"] and summary["robots_evaluated"] == 6
+        history = (sweep_dir / job / "history.csv").read_text().splitlines()
+        assert len(history) == 7 and all(f",{summary['method']}," in r for r in history[1:])
+        config = OmegaConf.load(sweep_dir / job / "config.yaml")
+        assert config.ga.schedule.last == 1536 and config.seed == 0
+    assert (sweep_dir / "multirun.yaml").is_file()
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
-def test_notebook_runs_top_to_bottom_on_the_ablation(
-    ablation: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str
-) -> None:
+def test_each_notebook_is_in_step_with_its_script(name: str) -> None:
     notebook = nbformat.read(REPO / "analysis" / f"{name}.ipynb", as_version=4)
     script = jupytext.read(REPO / "analysis" / f"{name}.pct.py")
     assert [c.source for c in notebook.cells] == [c.source for c in script.cells], (
         f"analysis/{name}.ipynb and its paired .pct.py differ: run jupytext --sync")
-    monkeypatch.setenv("EVO_RUNS", str(ablation))
-    monkeypatch.setenv("EVO_FIGURES", str(tmp_path))
-    monkeypatch.setenv("EVO_RESAMPLES", RESAMPLES)
-    monkeypatch.setenv("MUJOCO_GL", ENV["MUJOCO_GL"])
-    NotebookClient(notebook, timeout=300, kernel_name="python3",
-                   resources={"metadata": {"path": str(REPO)}}).execute()
-    outputs = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs]
-    assert not [o for o in outputs if o.output_type == "error"]
-    images = [o for o in outputs if "image/png" in o.get("data", {})]
-    figures = sorted(tmp_path.glob("*.png"))
-    assert figures and len(images) == len(figures), "every figure written and shown"
-    tables = "".join(o.get("data", {}).get("text/html", "") for o in outputs)
-    for method in METHODS:
-        assert f">{method}<" in tables, f"{method} in the notebook's tables"
+
+
+@pytest.mark.parametrize("command", group(ANALYSIS), ids=lambda c: c.text)
+def test_the_readme_command_works_as_written(made: Made, command: Command) -> None:
+    run_command(command, made.root, made)
+
+
+def test_relative_paths_start_where_jupyter_was_started(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PWD", "/home/me/evo")
+    assert launch_paths(f"outputs/a{os.pathsep}/data/b{os.pathsep}") == [
+        Path("/home/me/evo/outputs/a"), Path("/data/b")]
+    assert launch_paths("runs", launched_from="/srv") == [Path("/srv/runs")]
+    assert launch_paths("") == []

@@ -10,7 +10,6 @@ file covers the GA, executors, learners' method labels and the experiments.
 from __future__ import annotations
 
 import itertools
-import json
 import os
 import subprocess
 import sys
@@ -379,42 +378,3 @@ def test_a_new_run_in_a_run_directory_must_have_its_config(
     with pytest.raises(ConfigError, match=f"hydra.run.dir: {fresh} already holds a run"):
         _write_config(other, fresh)
     assert (fresh / "config.yaml").read_text() == saved, "the run's config was replaced"
-
-
-# ---- the ablation as a multirun, end to end -----------------------------------------------------
-
-
-@pytest.mark.slow
-def test_ablation_multirun_runs_the_four_methods(tmp_path: Path) -> None:
-    sweep_dir = tmp_path / "ablation"
-    tiny = [
-        "executor=serial",
-        "ga.population_size=2",
-        "ga.robot_budget=3",
-        "ga.schedule.initial=128",
-        "ga.schedule.first=128",
-        "ga.schedule.last=128",
-        "learner.num_envs=2",
-        "learner.epochs=1",
-        "learner.minibatch_size=64",
-        "learner.hidden=[16]",
-        "env.task.t_max=30",
-        "record=off",
-    ]
-    proc = start_main(
-        "+exp=ablation_smoke", *tiny, "seed=0,1", f"hydra.sweep.dir={sweep_dir}", cwd=tmp_path
-    )
-    stdout, stderr = proc.communicate(timeout=300)
-    assert proc.returncode == 0, stderr[-3000:]
-    jobs = sorted(p.name for p in sweep_dir.iterdir() if p.is_dir())
-    assert jobs == sorted(f"{m}_seed{s}" for m in METHODS for s in (0, 1)), jobs
-    for job in jobs:
-        summary = json.loads((sweep_dir / job / "summary.json").read_text())
-        method, seed = job.split("_seed")
-        assert summary["method"] == method
-        assert summary["complete"] and summary["robots_evaluated"] == 3
-        history = (sweep_dir / job / "history.csv").read_text().splitlines()
-        assert len(history) == 4 and all(f",{summary['method']}," in r for r in history[1:])
-        config = OmegaConf.load(sweep_dir / job / "config.yaml")
-        assert config.ga.schedule.last == 128 and config.seed == int(seed)
-    assert (sweep_dir / "multirun.yaml").is_file()

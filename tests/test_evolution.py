@@ -5,9 +5,10 @@ Two tiers:
 * in-process runs with a fast stand-in for the evaluation (a seeded function of the
   robot, no physics), so the loop's rules, its failure handling and its resume after a
   crash at every point can be checked exhaustively;
-* end-to-end runs of ``python evo/main.py`` in a subprocess with real training: the
-  smoke experiment, and runs killed with SIGKILL at several points and resumed with
-  ``python evo/main.py resume=<run dir>``.
+* end-to-end runs of ``python evo/main.py`` in a subprocess with real training: runs
+  killed with SIGKILL at several points and resumed with ``python evo/main.py
+  resume=<run dir>`` (the smoke experiment runs as the README shows it, in
+  tests/test_readme.py).
 """
 
 from __future__ import annotations
@@ -449,30 +450,6 @@ def check_run_dir(run_dir: Path, robot_budget: int) -> pd.DataFrame:
     assert json.loads((run_dir / "summary.json").read_text())["complete"]
     assert not list(run_dir.glob("*.tmp")), "a temporary file outlived the run"
     return history
-
-
-@pytest.mark.slow
-def test_smoke_experiment_end_to_end(tmp_path: Path) -> None:
-    run_dir, cwd = tmp_path / "run", tmp_path / "cwd"
-    cwd.mkdir()
-    done = run(main_cmd("+exp=smoke", f"hydra.run.dir={run_dir}"), cwd)
-    assert done.returncode == 0, done.stderr[-3000:]
-    history = check_run_dir(run_dir, robot_budget=8)
-    assert (history["method"] == "E+L").all()
-    schedule = BudgetSchedule(initial=2048, first=2048, last=4096)
-    for row in history.itertuples():
-        assert row.budget == schedule.budget(row.birth, 4, 8)
-        assert row.env_steps >= row.budget
-    summary = json.loads((run_dir / "summary.json").read_text())
-    best = summary["best_robot"]
-    assert summary["best_fitness"] == pytest.approx(history["fitness"].max())
-    assert f"best robot: {run_dir / 'robots' / best}.json" in done.stdout.replace("\n", "")
-    validate = run(
-        [sys.executable, "-m", "evo.robot", "validate", str(run_dir / "robots" / f"{best}.json")],
-        cwd,
-    )
-    assert validate.returncode == 0, validate.stdout + validate.stderr
-    assert list(cwd.iterdir()) == [], "the run wrote outside its run directory"
 
 
 @pytest.mark.slow

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
@@ -155,40 +154,6 @@ def test_mean_action_is_the_deterministic_action(ppo_run) -> None:  # noqa: ANN0
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         actor = ppo_run.policy.actor(TensorDict({"observation": obs}, batch_size=[32]))
     torch.testing.assert_close(ppo_run.policy.mean_action(obs), actor["action"], rtol=0, atol=0)
-
-
-def test_train_and_evaluate_from_the_command_line(tmp_path: Path) -> None:
-    from test_robot_config import run_main  # tests/ is on sys.path
-
-    robot = str(Path("robots/four_wheeler.json").resolve())
-    small = ["learner.num_envs=4", "learner.rollout_steps=64", "learner.epochs=1",
-             "learner.minibatch_size=128", "learner.eval_episodes=2", "env.task.t_max=100"]
-    run_dir = tmp_path / "train"
-    done = run_main("+exp=train", f"robot={robot}", "learner.total_steps=1000", *small,
-                    f"hydra.run.dir={run_dir}", cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    summary = json.loads((run_dir / "summary.json").read_text())
-    for key in ("fitness", "success_rate", "env_steps", "wall_seconds", "steps_per_second"):
-        assert isinstance(summary[key], int | float), (key, summary)
-    assert summary["env_steps"] == 1024, "the budget rounds up to whole batches of 256"
-    curve = pd.read_csv(run_dir / "curve.csv")
-    assert curve["env_steps"].tolist() == [256.0, 512.0, 768.0, 1024.0]
-    assert "deterministic evaluation: success" in done.stdout
-    assert (run_dir / ".hydra" / "config.yaml").is_file()
-    policy = run_dir / "policy.pt"
-    assert torch.load(policy, weights_only=True)
-
-    done = run_main("+exp=evaluate", f"robot={robot}", f"checkpoint={policy}", *small,
-                    f"hydra.run.dir={tmp_path / 'evaluate'}", cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    evaluation = json.loads((tmp_path / "evaluate" / "summary.json").read_text())
-    assert evaluation["episodes"] == 2 and 0 <= evaluation["success_rate"] <= 1
-    assert "over 2 deterministic episodes" in done.stdout
-
-    done = run_main("+exp=evaluate", f"robot={robot}", f"checkpoint={tmp_path / 'none.pt'}",
-                    f"hydra.run.dir={tmp_path / 'bad'}", cwd=tmp_path)
-    assert done.returncode == 2 and "Traceback" not in done.stderr
-    assert "none.pt" in done.stderr
 
 
 def test_collector_sampler_draws_from_the_actor_distribution_with_its_log_prob() -> None:

@@ -1,0 +1,346 @@
+"""The README's shell commands and how the README tests run each one.
+
+Every line of a fenced ``bash`` block of ``README.md`` is a command (a trailing ``\\``
+joins the next line; ``# ...`` comments are dropped). ``source`` and ``export`` lines set
+up the shell: they run before every later command of their block, in the same shell.
+
+The tests run each command with ``bash`` in a copy of the repository root (a folder of
+links to the repository's files, so outputs land in a temporary folder, never in the
+checkout), with this interpreter's virtualenv first on ``PATH``, exactly as written except
+for what the tables below say:
+
+* :data:`EXCLUDED`: commands that cannot run in a test, each with its reason;
+* :data:`HOW`: per command, arguments appended to make it small, extra environment,
+  what it must leave behind or print, and which test file runs it;
+* :data:`PLACES`: what each placeholder (``<run dir>``, ``<date>``, ...) is filled with,
+  from the runs the README's own commands made first (:attr:`How.makes_run`).
+
+A command in none of the tables runs as written, in ``tests/test_readme.py``, with its
+placeholders filled; a placeholder :data:`PLACES` does not know fails the test. A table
+entry naming no README command fails ``test_every_table_entry_names_a_readme_command``.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+import os
+import re
+import subprocess
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+SETUP = ("source ", "export ")
+"""Lines that set up the shell for the lines after them in their block."""
+PLACEHOLDER = re.compile(r"<[a-z][a-z ]*>|\b[A-Z]+\.\.\.|\bREV\b")
+"""What a placeholder looks like: ``<run dir>``, ``RUN...``, ``REV``."""
+
+
+@dataclass(frozen=True)
+class Command:
+    """One README command.
+
+    Attributes:
+        text: The command as written (continuations joined, the comment dropped).
+        setup: The ``source``/``export`` lines before it in its block.
+    """
+
+    text: str
+    setup: tuple[str, ...] = ()
+
+
+def readme_commands(readme: Path = README) -> list[Command]:
+    """Every command of the README's ``bash`` blocks, in order."""
+    found: list[Command] = []
+    for block in re.findall(r"^```bash\n(.*?)^```", readme.read_text(), re.S | re.M):
+        setup: list[str] = []
+        for line in block.replace("\\\n", " ").splitlines():
+            code = "" if line.lstrip().startswith("#") else line.split(" #")[0]
+            text = " ".join(code.split())
+            if text.startswith(SETUP):
+                setup.append(text)
+            elif text:
+                found.append(Command(text, tuple(setup)))
+    return found
+
+
+# ---------------------------------------------------------------- the tables
+
+EXCLUDED: dict[str, str] = {
+    "make demo": "a 10-12 minute evolution; test_configs composes +exp=demo and checks "
+                 "it is a small evolution, and +exp=smoke runs the same loop below",
+    "make test": "the test suite itself",
+    "python evo/main.py +exp=paper_clean": "the paper's run (100 robots, about 40 minutes); "
+                                           "test_configs composes and checks it",
+    "python evo/main.py +exp=ablation_paper": "the ablation at the paper's budget (hours); "
+                                              "test_configs composes and checks it",
+    "rerun outputs/<run>/evals/<name>.rrd": "opens the rerun viewer, a GUI",
+    "rerun outputs/<run>/run.rrd": "opens the rerun viewer, a GUI",
+    "pip install hydra-joblib-launcher": "installs an optional plugin from the network",
+    "pip install hydra-submitit-launcher": "installs an optional plugin from the network",
+    "pip install hydra-ray-launcher": "installs an optional plugin from the network",
+    'pip install -e ".[notebooks]"': "installs the optional notebook extra from the network",
+    "python evo/main.py +exp=ablation seed=0,1 hydra/launcher=joblib hydra.launcher.n_jobs=4 "
+    "executor.workers=4": "needs hydra-joblib-launcher, an optional plugin not installed",
+    "python evo/main.py +exp=ablation seed=0,1,2 hydra/launcher=submitit_slurm "
+    "hydra.launcher.partition=<partition> hydra.launcher.cpus_per_task=32 executor.workers=32":
+        "submits Slurm jobs: needs a cluster and the submitit plugin",
+    "python evo/main.py +exp=ablation hydra/launcher=ray hydra.launcher.ray.init.address=auto":
+        "needs a running Ray cluster and the Ray launcher plugin",
+    "python -m analysis.noise_ceiling --random 24 --seed 0 --seeds 2 --budget 100000 --out "
+    "noise/ record=off": "cannot be shrunk as typed: its report needs episodes that end (a "
+                         "budget of 32 arenas x T_max = 32k env steps per training, 6 trainings "
+                         "at least: minutes), and no override can follow its options; "
+                         "test_noise_ceiling runs the tool's main() on four robots",
+    "python -m analysis.noise_ceiling --robots robots/ --seeds 3 --out noise3/ learner=ppo "
+    "env=cluttered": "16 trainings in the cluttered arena (minutes); test_noise_ceiling runs "
+                     "the tool on a folder of robots with overrides",
+    "python -m analysis.noise_study run --out runs/noise --settings default paper --budgets "
+    "60000 150000": "the --random noise ceiling once per setting and budget (2 x 2 cells of "
+                    "72 trainings), each one the noise ceiling above",
+    "python bench/kill_resume.py --kills 20":
+        "runs a small evolution over 20 times (minutes; one kill still means three runs); "
+        "test_evolution's SIGKILL tests drive evo/main.py with its DRIVER",
+    "python bench/same_behaviour.py --before REV":
+        "checks out another commit (git worktree, needs the history) and runs the "
+        "evolution on both",
+    "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
+        "starts an interactive JupyterLab server; the kernel it starts is the one "
+        "`jupyter execute` starts, run above from the same folder",
+}
+"""Commands a test cannot run, each with its reason."""
+
+TINY_EVOLUTION = (  # six robots of four to six short batches, episodes ending in every one
+    "executor=serial record.rerun=false env.task.t_max=40 learner.num_envs=8 "
+    "learner.rollout_steps=32 learner.epochs=2 ga.population_size=3 ga.robot_budget=6 "
+    "ga.schedule.initial=1024 ga.schedule.first=1024 ga.schedule.last=1536"
+)
+TINY_TRAINING = ("learner.num_envs=4 learner.rollout_steps=64 learner.epochs=1 "
+                 "learner.minibatch_size=128 learner.eval_episodes=2 env.task.t_max=100")
+
+
+@dataclass(frozen=True)
+class How:
+    """How a test runs one README command (the default: as written, in test_readme.py).
+
+    Attributes:
+        append: Arguments appended to make it small (Hydra overrides or its own flags).
+        env: Environment variables added, ``KEY=value`` separated by spaces (sizes).
+        fill: (placeholder, key of :data:`PLACES`) pairs, each filling the first
+            occurrence of the placeholder, where the placeholder's own entry does not fit.
+        makes: Files it must leave (glob patterns, placeholders filled, from the root);
+            they are removed before it runs.
+        says: Text its standard output must hold.
+        makes_run: The name under which the run directory it creates is kept for
+            :data:`PLACES`; such a command runs first, when its test file starts.
+        group: ``"main"`` (tests/test_readme.py, around the smoke run) or ``"analysis"``
+            (tests/test_analysis_report.py, around the ablation it shares with the
+            analysis tests).
+    """
+
+    append: str = ""
+    env: str = ""
+    fill: tuple[tuple[str, str], ...] = ()
+    makes: tuple[str, ...] = ()
+    says: str = ""
+    makes_run: str = ""
+    group: str = "main"
+
+
+THROUGHPUT = ("env.task.t_max=50 --steps 256 --robots robots/four_wheeler.json "
+              "--arenas clean")  # overrides first: the README line may end in overrides
+SMALL_THROUGHPUT = f"learner.num_envs=16 {THROUGHPUT}"
+ANALYSIS = "analysis"
+HOW: dict[str, How] = {
+    # ---- the runs the others read, made first
+    "python evo/main.py +exp=smoke": How(makes_run="smoke", says="best robot:"),
+    "python evo/main.py +exp=train robot=robots/four_wheeler.json": How(
+        append=f"learner.total_steps=1024 {TINY_TRAINING}", makes_run="train",
+        says="deterministic evaluation:"),
+    "python evo/main.py +exp=ablation": How(
+        append=TINY_EVOLUTION, makes_run="ablation",
+        group=ANALYSIS),
+    # ---- evo
+    "python evo/main.py +exp=evaluate robot=robots/four_wheeler.json "
+    "checkpoint=<run dir>/policy.pt": How(append=TINY_TRAINING,
+                                          fill=(("<run dir>", "<train run dir>"),),
+                                          says="over 2 deterministic episodes",
+                                          makes_run="evaluate"),
+    "python evo/main.py resume=<run dir>": How(says="robots evaluated"),
+    "python -m evo.replay <run dir> <robot name> --video out.mp4 --rrd out.rrd": How(
+        makes=("out.mp4", "out.rrd")),
+    "python -m evo.replay --gallery <run dir>": How(append="--top 2",
+                                                   makes=("<run dir>/best.png",)),
+    "python evo/main.py task=robots robots.count=8": How(makes=("outputs/*/*/robots/*.png",)),
+    # ---- analysis
+    "python -m analysis.report outputs/ablation/<date> --out report/": How(
+        append="--resamples 100", makes=("report/report.md", "report/*.png"), group=ANALYSIS),
+    "python -m analysis.report outputs/ablation/<date> --out report/ --first 60": How(
+        append="--resamples 100", makes=("report/report.md",), group=ANALYSIS),
+    "python -m analysis.early_slope outputs/ablation/<date> --out early/": How(
+        append="--resamples 100", makes=("early/early_slope.md", "early/*.png"), group=ANALYSIS),
+    "python -m analysis.early_slope outputs/ablation/<date> --out early/ --retrained <dirs>":
+        How(append="--resamples 100", makes=("early/early_slope.md",), group=ANALYSIS),
+    "python -m analysis.equal_cost --without <runs> --with <runs> --out cost/": How(
+        fill=(("<runs>", "<runs without>"), ("<runs>", "<runs with>")),
+        makes=("cost/equal_cost.md", "cost/equal_cost.png"), group=ANALYSIS),
+    "EVO_RUNS=outputs/ablation/<date> jupyter execute analysis/ablation.ipynb": How(
+        env="EVO_RESAMPLES=100 EVO_FIGURES=figures/ablation",
+        makes=("figures/ablation/*.png",), group=ANALYSIS),
+    "EVO_RUNS=outputs/ablation/<date> jupyter execute analysis/early_slope.ipynb": How(
+        env="EVO_RESAMPLES=100 EVO_FIGURES=figures/early_slope",
+        makes=("figures/early_slope/*.png",), group=ANALYSIS),
+    # ---- benchmarks, at their smallest
+    "python bench/robots.py": How(append="--count 200 --pairs 50"),
+    "python bench/env_throughput.py": How(
+        append="--steps 20 --robots robots/four_wheeler.json --num-envs 12 --nthread 1 "
+               "--arenas clean --repeats 1"),
+    "python bench/train_throughput.py": How(append=SMALL_THROUGHPUT),
+    "python bench/train_throughput.py --profile": How(append=SMALL_THROUGHPUT),
+    "python bench/train_throughput.py --steps 150000 --quality": How(append=SMALL_THROUGHPUT),
+    "python bench/train_throughput.py learner.num_envs=32 learner.rollout_steps=64": How(
+        append=THROUGHPUT),
+    "python bench/ppo_floor.py": How(
+        append="--repeats 1 learner.num_envs=4 learner.rollout_steps=64 "
+               "learner.minibatch_size=128"),
+    "python bench/record_overhead.py": How(append="--steps 1024 --repeats 1"),
+}
+"""Per command: how it is run, where that is not exactly as written."""
+
+
+@dataclass(frozen=True)
+class Made:
+    """The run directories the README's first commands made, by name, under ``root``."""
+
+    root: Path
+    runs: dict[str, Path] = field(default_factory=dict)
+    strays: dict[str, list[str]] = field(default_factory=dict)
+    """Per run: what its command wrote into the root outside ``outputs/``."""
+
+    def rel(self, name: str, start: str = "") -> str:
+        """Run ``name``'s path relative to ``root / start`` (as a user would type it)."""
+        return str(self.runs[name].relative_to(self.root / start))
+
+    def best(self, name: str) -> str:
+        """The best robot of run ``name``."""
+        return str(json.loads((self.runs[name] / "summary.json").read_text())["best_robot"])
+
+    def job(self, method: str) -> str:
+        """The ablation's job of ``method`` (GA seed 0), relative to ``root``."""
+        return self.rel("ablation") + f"/{method}_seed0"
+
+
+PLACES: dict[str, Callable[[Made], str]] = {
+    "<run dir>": lambda m: m.rel("smoke"),
+    "<run>": lambda m: m.rel("smoke", "outputs"),
+    "<robot name>": lambda m: m.best("smoke"),
+    "<name>": lambda m: m.best("smoke"),
+    "RUN...": lambda m: m.rel("smoke"),
+    "<train run dir>": lambda m: m.rel("train"),
+    "<date>": lambda m: m.runs["ablation"].name,
+    "<dirs>": lambda m: m.job("E+L"),
+    "<runs without>": lambda m: m.job("E+L"),
+    "<runs with>": lambda m: m.job("R+L"),
+}
+"""Placeholder -> its value, from the runs the README's first commands made."""
+
+
+# ---------------------------------------------------------------- running them
+
+
+def how(command: Command) -> How:
+    """How ``command`` is run (the default for a command no table names)."""
+    return HOW.get(command.text, How())
+
+
+def group(name: str, readme: Path = README) -> list[Command]:
+    """The commands test file ``name`` runs after its first runs, in README order."""
+    return [c for c in readme_commands(readme) if c.text not in EXCLUDED
+            and how(c).group == name and not how(c).makes_run]
+
+
+def filled(text: str, entry: How, made: Made) -> str:
+    """``text`` with its placeholders filled from ``made``.
+
+    Raises:
+        KeyError: Naming a placeholder :data:`PLACES` has no entry for.
+    """
+    for placeholder, key in entry.fill:
+        text = text.replace(placeholder, PLACES[key](made), 1)
+    for placeholder in sorted(set(PLACEHOLDER.findall(text)), key=len, reverse=True):
+        if placeholder not in PLACES:
+            raise KeyError(f"no value for {placeholder}: add it to PLACES in {__file__}")
+        text = text.replace(placeholder, PLACES[placeholder](made))
+    return text
+
+
+def copy_of_the_root(folder: Path) -> Path:
+    """A folder that looks like the repository root: a link to each of its entries but
+    those git ignores (outputs, runs), and a ``.venv`` that is this interpreter's."""
+    ignored = [line.strip().strip("/") for line in (REPO / ".gitignore").read_text().splitlines()
+               if line.strip() and not line.startswith("#")]
+    for entry in REPO.iterdir():
+        if not entry.name.startswith(".") and not any(
+                fnmatch.fnmatch(entry.name, pattern) for pattern in ignored):
+            (folder / entry.name).symlink_to(entry)
+    venv = folder / ".venv"
+    if sys.prefix != sys.base_prefix:
+        venv.symlink_to(sys.prefix)
+    else:  # no virtualenv: an activate script that puts this interpreter first
+        (venv / "bin").mkdir(parents=True)
+        (venv / "bin" / "activate").write_text(
+            f'export PATH="{Path(sys.executable).parent}:$PATH"\n')
+    return folder
+
+
+def environment(extra: str = "") -> Mapping[str, str]:
+    """The commands' environment: this interpreter's bin folder first on ``PATH``,
+    this checkout importable, offscreen rendering, and ``extra`` (``KEY=value ...``)."""
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "COLUMNS": "120",
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
+           "PATH": os.pathsep.join([str(Path(sys.executable).parent), os.environ["PATH"]])}
+    env.update(pair.split("=", 1) for pair in extra.split())
+    return env
+
+
+def run(command: Command, root: Path, made: Made) -> subprocess.CompletedProcess[str]:
+    """Run ``command`` (its setup lines first) with bash in ``root``; check that it
+    exits 0, leaves what :attr:`How.makes` names and prints :attr:`How.says`."""
+    entry = how(command)
+    text = filled(f"{command.text} {entry.append}".strip(), entry, made)
+    makes = [filled(pattern, entry, made) for pattern in entry.makes]
+    for pattern in makes:
+        for path in root.glob(pattern):
+            path.unlink()
+    script = "\n".join([*command.setup, text])
+    done = subprocess.run(["bash", "-ec", script], cwd=root, env=environment(entry.env),
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, f"{text}\nexit {done.returncode}\n{done.stderr[-3000:]}"
+    for pattern in makes:
+        found = [p for p in root.glob(pattern) if p.is_file() and p.stat().st_size > 0]
+        assert found, f"{text}\nleft no {pattern}"
+    assert entry.says in done.stdout, f"{text}\nprinted no {entry.says!r}:\n{done.stdout[-2000:]}"
+    return done
+
+
+def run_first(name: str, root: Path) -> Made:
+    """Run group ``name``'s commands that make runs, in README order, and return them."""
+    made = Made(root)
+    for command in readme_commands():
+        entry = how(command)
+        if entry.group != name or not entry.makes_run or command.text in EXCLUDED:
+            continue
+        before, entries = set(root.glob("outputs/**/")), set(root.iterdir())
+        run(command, root, made)
+        made.strays[entry.makes_run] = sorted(
+            p.name for p in set(root.iterdir()) - entries if p.name != "outputs")
+        new = sorted((p for p in set(root.glob("outputs/**/")) - before
+                      if (p / "summary.json").is_file() or (p / "multirun.yaml").is_file()),
+                     key=lambda p: len(p.parts))
+        assert new, f"{command.text} made no run directory in outputs/"
+        made.runs[entry.makes_run] = new[0]
+    return made
