@@ -19,7 +19,8 @@ naming the key (an unknown parameter, an empty range; exit 2) and continues a st
 study: ``hydra.sweeper.n_trials`` is the study's total, so the same command run again
 runs only the trials still missing; a trial that a stop left running is marked failed
 and asked again with its settings, and its finished trainings are reused. Each trial's
-folder is ``<sweep dir>/trials/<digest of its overrides>/``: a noise-ceiling folder
+folder is ``<sweep dir>/trials/<digest of its overrides>/`` (the executor's left
+out: it does not change the numbers): a noise-ceiling folder
 (``trainings.csv``, ``noise_ceiling.md``, ``summary.json``) with ``trial.json``.
 ``python -m analysis.noise_sweep table DIR`` writes the trials' table
 (``trials.csv``, ``trials.md``) and the frontier figure (``frontier.png``).
@@ -310,8 +311,9 @@ class SweepCheck(Callback):
 
 def trials_table(sweep_dir: Path, study_name: str = "noise_sweep") -> pd.DataFrame:
     """One row per trial of the study in ``sweep_dir``: number, state, the measured
-    agreement and cost (from each trial's ``trial.json``), its parameters, its folder,
-    and whether it is on the Pareto front (no other trial is as good on both)."""
+    agreement and cost (from the ``trial.json`` of a complete trial), its parameters,
+    its folder, and whether it is on the Pareto front (no other trial is as good on
+    both)."""
     import optuna
     import pandas as pd
 
@@ -324,7 +326,8 @@ def trials_table(sweep_dir: Path, study_name: str = "noise_sweep") -> pd.DataFra
     for trial in study.get_trials(deepcopy=False):
         params = {k: v for k, v in trial.params.items()}
         wanted = {f"{k}={v}" for k, v in params.items()}
-        match = next((m for key, m in measured.items() if wanted <= key), {})
+        match = next((m for key, m in measured.items() if wanted <= key), {}
+                     ) if trial.state.name == "COMPLETE" else {}
         rows.append({"trial": trial.number, "state": trial.state.name,
                      **{k: match.get(k, float("nan")) for k in (
                          "spearman", "icc", "top_quarter", "core_seconds_per_robot",
