@@ -4,9 +4,10 @@ today's 0.005 s × 10 (one control step of 0.05 s either way).
 For each hand-made robot and each pair (``morphology.physics.timestep``,
 ``env.task.frame_skip``), in the clean arena:
 
-* ``raw``: env steps/s of a bare ``mujoco.batch.Batch`` of N arenas on one thread,
-  random controls (``bench/env_throughput.py``'s ``raw_rate``): what a training's
-  physics can reach;
+* ``raw``: env steps per CPU-second of the env's ``mujoco.batch.Batch`` of N arenas on
+  one thread, random controls, no Python in between: what a training's physics can
+  reach on one core. CPU time, not wall time, so that other work on a shared machine
+  does not move the figure;
 * ``path``: a fixed action sequence (each arena's actions drawn once, held for 5
   control steps, the same for every pair) run for ``--seconds`` of simulated time from
   the same start; the RMS, over arenas, control steps and modules, of the distance
@@ -32,13 +33,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import glob
+import time
 
 import numpy as np
-from env_throughput import raw_rate  # bench/ is on sys.path when this runs
 
 from evo.envs.arena import ArenaParams
 from evo.envs.params import TaskParams
-from evo.envs.reach import ReachEnv
 from evo.envs.task import ReachCore
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -65,6 +65,19 @@ def core_of(robot: Robot, pair: tuple[float, int], num_envs: int, t_max: int) ->
     physics = dataclasses.replace(PhysicsParams(), timestep=pair[0])
     task = dataclasses.replace(TaskParams(), frame_skip=pair[1], t_max=t_max)
     return ReachCore(robot, physics, ArenaParams(), task, num_envs, 1, seed=0)
+
+
+def cpu_rate(core: ReachCore, steps: int, rng: np.random.Generator) -> float:
+    """Env steps per CPU-second of ``core``'s batch stepping ``frame_skip`` physics steps
+    per control step under random controls."""
+    controls = rng.uniform(-1, 1, (steps, core.num_envs, core.model.nu)) * core.ctrl_scale
+    core.reset()
+    core.batch.step(nstep=10 * core.task.frame_skip)  # settle
+    start = time.process_time()
+    for t in range(steps):
+        core.ctrl[:] = controls[t]
+        core.batch.step(nstep=core.task.frame_skip)
+    return core.num_envs * steps / (time.process_time() - start)
 
 
 def actions(core: ReachCore, steps: int, seed: int = 0) -> np.ndarray:
@@ -101,7 +114,7 @@ def main() -> None:
     cli.add_argument("--seconds", type=float, default=10.0, help="simulated time of a path")
     cli.add_argument("--arenas", type=int, default=8, help="arenas (action sequences) per path")
     cli.add_argument("--num-envs", type=int, default=32, help="arenas of the raw-rate batch")
-    cli.add_argument("--rate-steps", type=int, default=150, help="control steps per rate")
+    cli.add_argument("--rate-steps", type=int, default=100, help="control steps per rate")
     args = cli.parse_args()
     pairs = [parse_pair(p) for p in args.pairs]
     finest = min(pairs, key=lambda p: p[0])
@@ -123,9 +136,8 @@ def main() -> None:
                                  f"step; keep {TODAY[0] * TODAY[1]:g} s")
             core = core_of(robot, pair, args.arenas, t_max=10 * steps)
             runs[pair] = module_paths(core, actions(core, steps))
-            env = ReachEnv(core_of(robot, pair, args.num_envs, 1000))
-            rates[pair] = max(raw_rate(env, args.rate_steps, rng) for _ in range(2))
-            env.close()
+            batch = core_of(robot, pair, args.num_envs, 1000)
+            rates[pair] = max(cpu_rate(batch, args.rate_steps, rng) for _ in range(2))
         today = runs.get(TODAY, runs[pairs[0]])
         for pair in pairs:
             paths, unstable, warnings = runs[pair]
