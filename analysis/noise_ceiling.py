@@ -300,6 +300,16 @@ class Settings:
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    @classmethod
+    def of(cls, cfg: DictConfig, overrides: Sequence[str], *, budget: int, seeds: int,
+           root_seed: int, baseline: bool, robots: Sequence[Any]) -> Settings:
+        """The settings of a noise ceiling of ``robots`` under the composed ``cfg``."""
+        kept = OmegaConf.to_container(cfg, resolve=True)
+        assert isinstance(kept, dict)
+        kept.pop("executor", None)
+        return cls(tuple(overrides), budget, seeds, root_seed, baseline,
+                   tuple(r.name for r in robots), OmegaConf.to_yaml(OmegaConf.create(kept)))
+
     COMPARED = ("budget", "seeds", "root_seed", "baseline", "structures", "config")
     """What must match to continue a folder (the overrides may differ, e.g. the
     executor, as long as the resolved config without it is the same)."""
@@ -315,7 +325,7 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int,
             robot (named), or fewer than three robots.
     """
     from evo.edge import generator_of, limits_of
-    from evo.robot import InvalidRobotError, RobotFileError, load_robot, random_robots
+    from evo.robot import InvalidRobotError, Robot, RobotFileError, load_robot, random_robots
 
     if robots is not None:
         if not robots.is_dir():
@@ -323,7 +333,7 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int,
         files = sorted(robots.glob("*.json"))
         if not files:
             raise NoiseCeilingError(f"--robots {robots}: no robot files (*.json) in it")
-        found = {}
+        found: dict[str, Robot] = {}
         for path in files:
             try:
                 robot = load_robot(path, limits_of(cfg))
@@ -380,6 +390,16 @@ def _check_settings(out: Path, settings: Settings) -> None:
         raise NoiseCeilingError(
             f"--out {out}: holds a noise ceiling with other settings ({', '.join(differ)} "
             "differ); give the same arguments to continue it, or another --out")
+
+
+def open_folder(out: Path, settings: Settings) -> None:
+    """Create ``out`` or continue it: refuse a folder that is not one or that holds a
+    noise ceiling of other settings, then store ``settings.json``."""
+    if out.exists() and not out.is_dir():
+        raise NoiseCeilingError(f"--out {out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    _check_settings(out, settings)
+    (out / SETTINGS).write_text(json.dumps(settings.to_json(), indent=2) + "\n")
 
 
 def read_trainings(out: Path) -> pd.DataFrame:
@@ -596,17 +616,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if budget < 1:
             raise NoiseCeilingError(f"--budget: expected a positive env-step count, got {budget}")
         robots = load_structures(args.robots, args.random, args.seed, cfg)
-        kept = OmegaConf.to_container(cfg, resolve=True)
-        assert isinstance(kept, dict)
-        kept.pop("executor", None)
-        settings = Settings(tuple(args.overrides), budget, args.seeds, args.seed,
-                            not args.no_baseline, tuple(r.name for r in robots),
-                            OmegaConf.to_yaml(OmegaConf.create(kept)))
-        if args.out.exists() and not args.out.is_dir():
-            raise NoiseCeilingError(f"--out {args.out}: exists and is not a folder")
-        args.out.mkdir(parents=True, exist_ok=True)
-        _check_settings(args.out, settings)
-        (args.out / SETTINGS).write_text(json.dumps(settings.to_json(), indent=2) + "\n")
+        settings = Settings.of(cfg, args.overrides, budget=budget, seeds=args.seeds,
+                               root_seed=args.seed, baseline=not args.no_baseline,
+                               robots=robots)
+        open_folder(args.out, settings)
         trainings = run_trainings(args.out, cfg, settings, robots)
     except (NoiseCeilingError, ConfigError) as err:
         print(f"error: {err}", file=sys.stderr)

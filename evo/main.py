@@ -10,7 +10,9 @@ Tasks (``task=``):
   ``resume=<run dir>`` continues a stopped run in its own directory;
 * ``robots``: generate, save and picture random robots;
 * ``train``: train one robot (``robot=FILE``) and evaluate it deterministically;
-* ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``).
+* ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``);
+* ``noise_sweep``: one trial of the noise-ceiling sweep (``+exp=noise_sweep``); it
+  returns the trial's objectives to Hydra's Optuna sweeper.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
+from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
 from evo.config import ConfigError, typed
@@ -268,16 +271,23 @@ def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> No
     path.write_text(text)
 
 
-TASKS: dict[str, Callable[[DictConfig, Path, RunLock], None]] = {
+def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, float]:
+    """One trial of ``+exp=noise_sweep``: agreement between seeds and core-seconds per
+    robot, for the Optuna sweeper (``analysis.noise_sweep``)."""
+    return run_trial(cfg, out, trial_overrides()).values()
+
+
+TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
     "evolve": run_evolve,
     "robots": run_robots,
     "train": run_train,
     "evaluate": run_evaluate,
+    "noise_sweep": run_noise_sweep,
 }
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
-def main(cfg: DictConfig) -> None:
+def main(cfg: DictConfig) -> object:
     """Dispatch on ``task`` in a run directory this process owns (``evo.run.files``).
 
     A bad config value, or a directory another process holds, ends the run with one
@@ -300,7 +310,7 @@ def main(cfg: DictConfig) -> None:
             if cfg.resume is None:
                 check_seed(cfg)
                 _write_config(cfg, out, lock)
-            task(cfg, out, lock)
+            return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)
         sys.exit(2)

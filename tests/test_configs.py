@@ -87,9 +87,19 @@ def build(cfg: DictConfig, out: Path) -> EvolveParts:
 
 
 def sweep(cfg: DictConfig) -> list[list[str]]:
-    """Every job of a multirun experiment, as override lists (the basic sweeper's grid)."""
+    """Every job of a multirun experiment, as override lists: the basic sweeper's grid, or
+    for Optuna's every value of each parameter alone (an interval: its ends), as the
+    Optuna sweeper writes it."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
     params = cfg.hydra.sweeper.get("params") or {}
-    axes = [[f"{key}={v}" for v in str(values).split(",")] for key, values in params.items()]
+    parsed = OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()])
+    axes = [[f"{o.key_or_group}={v}" for v in (
+        [o.value().start, o.value().end] if o.is_interval_sweep()
+        else o.sweep_iterator() if o.is_sweep_override()
+        else [o.get_value_element_as_str()])] for o in parsed]
+    if "optuna" in str(cfg.hydra.sweeper.get("_target_")):
+        return [[job] for axis in axes for job in axis]
     return [list(job) for job in itertools.product(*axes)]
 
 

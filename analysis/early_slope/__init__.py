@@ -346,7 +346,8 @@ def _thresholds(group: pd.DataFrame, prediction: NDArray[np.float64], quantile: 
     predictions, or its own ``threshold_column``. A robot is rejected when its
     prediction is below (NaN on either side compares False: never rejected)."""
     if threshold_column is not None:
-        return group[threshold_column].to_numpy(dtype=float)
+        own: NDArray[np.float64] = group[threshold_column].to_numpy(dtype=float)
+        return own
     finite = prediction[np.isfinite(prediction)]
     cut_value = np.quantile(finite, quantile) if len(finite) else np.nan
     return np.full(len(group), cut_value)

@@ -48,7 +48,13 @@ class LearnerConfig:
         max_grad_norm: Gradient norm clip.
         hidden: Hidden layer widths of the policy and value MLPs.
         init_log_std: Initial log standard deviation of the Gaussian policy.
+        policy_out_gain: Gain of the orthogonal initialisation of the policy's last
+            layer: 0.01 starts every mean action near zero (Andrychowicz et al. 2021),
+            1 as large as the layers before it, 0 exactly zero.
         normalize_obs: Normalise observations with running statistics.
+        reward_scaling: Divide the rewards the update sees by the running standard
+            deviation of the discounted return (Engstrom et al. 2020); the curve and
+            the fitness keep the env's rewards.
         eval_episodes: Episodes of the deterministic evaluation after training.
     """
 
@@ -69,7 +75,9 @@ class LearnerConfig:
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (128, 128)
     init_log_std: float = -0.5
+    policy_out_gain: float = 0.01
     normalize_obs: bool = True
+    reward_scaling: bool = False
     eval_episodes: int = 20
 
     def __post_init__(self) -> None:
@@ -80,7 +88,8 @@ class LearnerConfig:
                   ("clip_epsilon", self.clip_epsilon > 0, "> 0"),
                   ("max_grad_norm", self.max_grad_norm > 0, "> 0"),
                   ("entropy_coeff", self.entropy_coeff >= 0, ">= 0"),
-                  ("critic_coeff", self.critic_coeff >= 0, ">= 0"))
+                  ("critic_coeff", self.critic_coeff >= 0, ">= 0"),
+                  ("policy_out_gain", self.policy_out_gain >= 0, ">= 0"))
         for key, ok, expected in ranges:
             if not ok:
                 raise ValueError(f"{key} must be {expected}, got {getattr(self, key)}")
@@ -156,10 +165,11 @@ class GaussianHead(nn.Module):
     """Mean from an MLP of the normalised observation, scale from a learned log std."""
 
     def __init__(
-        self, norm: RunningNorm, obs: int, act: int, hidden: tuple[int, ...], init_log_std: float
+        self, norm: RunningNorm, obs: int, act: int, hidden: tuple[int, ...], init_log_std: float,
+        out_gain: float = 0.01,
     ) -> None:
         super().__init__()
-        self.norm, self.mlp = norm, _mlp(obs, act, hidden, out_gain=0.01)
+        self.norm, self.mlp = norm, _mlp(obs, act, hidden, out_gain=out_gain)
         self.log_std = nn.Parameter(torch.full((act,), init_log_std))
 
     def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -252,7 +262,8 @@ class Policy:
 def make_policy(obs_size: int, action_size: int, config: LearnerConfig) -> Policy:
     """Fresh actor and critic for ``obs_size`` observations and ``action_size`` actions."""
     norm = RunningNorm(obs_size, enabled=config.normalize_obs)
-    head = GaussianHead(norm, obs_size, action_size, config.hidden, config.init_log_std)
+    head = GaussianHead(norm, obs_size, action_size, config.hidden, config.init_log_std,
+                        config.policy_out_gain)
     actor = ProbabilisticActor(
         TensorDictModule(head, in_keys=["observation"], out_keys=["loc", "scale"]),
         in_keys=["loc", "scale"],

@@ -38,7 +38,7 @@ from torchrl.objectives.value import GAE
 from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
 from evo.learners import CurveHook, EpisodeHook
-from evo.learners.common import LearnerConfig, Policy, TrainResult, make_policy
+from evo.learners.common import LearnerConfig, Policy, RunningNorm, TrainResult, make_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -151,6 +151,31 @@ def _objective(
     return loss, gae, torch.optim.Adam(loss.parameters(), lr=config.lr, foreach=True)
 
 
+class RewardScale:
+    """Rewards divided by the running standard deviation of the discounted return
+    (``reward_scaling``; Engstrom et al. 2020, CleanRL's ``NormalizeReward``).
+
+    The discounted return of every arena runs on across batches and restarts when an
+    episode ends; the update sees the scaled rewards, the curve the env's own.
+    """
+
+    def __init__(self, num_envs: int, gamma: float) -> None:
+        self.gamma = gamma
+        self.returns = torch.zeros(num_envs, 1)
+        self.stats = RunningNorm(1)
+
+    def __call__(self, batch: TensorDictBase) -> None:
+        """Scale ``batch``'s rewards (arenas x time x 1) in place."""
+        reward, done = batch["next", "reward"], batch["next", "done"]
+        seen = torch.empty_like(reward)
+        for t in range(reward.shape[-2]):
+            self.returns = self.returns * self.gamma + reward[..., t, :]
+            seen[..., t, :] = self.returns
+            self.returns = torch.where(done[..., t, :], 0.0, self.returns)
+        self.stats.update(seen)
+        batch.set(("next", "reward"), reward / torch.sqrt(self.stats.var + 1e-8))
+
+
 def _batch_row(batch: TensorDictBase, steps: int,
                episodes: dict[str, torch.Tensor]) -> dict[str, float]:
     """The curve row's env-step count, episode statistics and reward terms of a batch."""
@@ -182,6 +207,7 @@ def _train(
         env, policy.sampler(), frames_per_batch=config.frames_per_batch, total_frames=frames,
         auto_register_policy_transforms=False, track_traj_ids=False,
     )
+    scale = RewardScale(config.num_envs, config.gamma) if config.reward_scaling else None
     rows: list[dict[str, float]] = []
     returns_sum, returns_count, steps = 0.0, 0, 0
     stopped = False
@@ -197,7 +223,8 @@ def _train(
             returns_count += int(episodes["return"].numel())
             row = _batch_row(batch, steps, episodes)
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
-                row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget))
+                row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
+                                  scale))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -237,15 +264,18 @@ def _learn(
     config: LearnerConfig,
     steps: int,
     budget: int,
+    scale: RewardScale | None = None,
 ) -> dict[str, float]:
-    """One PPO update on ``batch``, then the observation statistics; NaN losses when the
-    learner does not update."""
+    """One PPO update on ``batch`` (its rewards scaled first by ``scale``, if given),
+    then the observation statistics; NaN losses when the learner does not update."""
     if not config.update:
         return {**dict.fromkeys(_LOSS_KEYS, float("nan")), "train/lr": 0.0}
     lr = config.lr * (max(0.0, 1 - (steps - batch.numel()) / budget) if config.anneal_lr else 1)
     for group in optimizer.param_groups:
         group["lr"] = lr
     with torch.no_grad():
+        if scale is not None:
+            scale(batch)
         gae(batch)
     losses = _update(batch, loss, optimizer, config)
     # Statistics change only after the update, so the update's ratios start at 1.
