@@ -108,9 +108,11 @@ def rms(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def main() -> None:
-    cli = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    cli.add_argument("--robots", nargs="+", default=sorted(glob.glob("robots/*.json")))
-    cli.add_argument("--pairs", nargs="+", default=list(PAIRS), help="timestep x substeps")
+    cli = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    cli.add_argument("--robots", nargs="+", default=sorted(glob.glob("robots/*.json")),
+                     help="robot files (default: robots/*.json)")
+    cli.add_argument("--pairs", nargs="+", default=list(PAIRS),
+                     help="timestep x substeps, e.g. 0.01x5")
     cli.add_argument("--seconds", type=float, default=10.0, help="simulated time of a path")
     cli.add_argument("--arenas", type=int, default=8, help="arenas (action sequences) per path")
     cli.add_argument("--num-envs", type=int, default=32, help="arenas of the raw-rate batch")

@@ -108,6 +108,13 @@ EXCLUDED: dict[str, str] = {
     "python bench/same_behaviour.py --before REV":
         "checks out another commit (git worktree, needs the history) and runs the "
         "evolution on both",
+    "python evo/main.py +exp=noise_sweep":
+        "30 noise-ceiling trials of 32 trainings each (hours); test_noise_sweep runs the same "
+        "config end to end with two tiny trials, and a rerun that continues it",
+    "python evo/main.py +exp=noise_sweep hydra.sweeper.n_trials=3":
+        "three trials of 32 trainings (about 20 minutes); test_noise_sweep runs two tiny ones",
+    "python -m analysis.noise_sweep table runs/noise_sweep":
+        "reads the study the sweep above makes; test_noise_sweep reads its tiny study's table",
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",
@@ -208,6 +215,9 @@ HOW: dict[str, How] = {
         append="--repeats 1 learner.num_envs=4 learner.rollout_steps=64 "
                "learner.minibatch_size=128"),
     "python bench/record_overhead.py": How(append="--steps 1024 --repeats 1"),
+    "python bench/physics_step.py": How(
+        append="--robots robots/four_wheeler.json --seconds 0.5 --arenas 2 --num-envs 4 "
+               "--rate-steps 10", says="verdict"),
 }
 """Per command: how it is run, where that is not exactly as written."""
 
