@@ -8,6 +8,7 @@ error, and the evolution loop records it and goes on.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import time
@@ -156,6 +157,10 @@ def evaluate(candidate: Candidate, job: Job) -> Outcome:
             raise stop from err
         return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
                        error=traceback.format_exc(limit=8))
+    finally:
+        # The evaluation's reference cycles (recording streams among them) hold native
+        # memory that a long-lived worker would otherwise keep until a rare full collection.
+        gc.collect()
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 
