@@ -9,6 +9,7 @@ learner config names (``evo.learners.get_learner``) unless the caller passes ano
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import time
@@ -164,6 +165,10 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
             raise stop from err
         return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
                        error=traceback.format_exc(limit=8))
+    finally:
+        # The evaluation's reference cycles (recording streams among them) hold native
+        # memory that a long-lived worker would otherwise keep until a rare full collection.
+        gc.collect()
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import gc
 import math
 from pathlib import Path
 
+import foxglove
 import mujoco
 import numpy as np
 import pandas as pd
@@ -370,6 +372,20 @@ def test_exception_inside_with_closes_the_file(tmp_path: Path) -> None:
     assert is_complete(path)
     meta = read_metadata(path)
     assert meta["status"] == "failed" and "boom" in meta["error"]
+
+
+def test_closed_recorders_leave_no_channel_behind(tmp_path: Path) -> None:
+    def channels() -> int:
+        gc.collect()
+        return sum(isinstance(o, foxglove.Channel) for o in gc.get_objects())
+
+    model, before = scene(), channels()
+    for i in range(3):
+        with McapRecorder(tmp_path / f"{i}.mcap", model, {}) as rec:
+            rec.curve({"env_steps": 1.0})
+    del rec
+    assert channels() == before, "every recorded evaluation would keep its channels"
+    assert read_curve(tmp_path / "2.mcap")["env_steps"].tolist() == [1.0]
 
 
 def test_truncated_files_give_a_prefix_of_the_rows(tmp_path: Path) -> None:

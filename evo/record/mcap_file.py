@@ -161,6 +161,7 @@ class McapFile:
     def __init__(self, path: str | Path, metadata: Mapping[str, Any]) -> None:
         self.path = Path(path)
         self.context = foxglove.Context()
+        self.channels: list[foxglove.Channel] = []
         options = MCAPWriteOptions(
             compression=MCAPCompression.Zstd,
             compression_level=1,
@@ -176,11 +177,18 @@ class McapFile:
             raise RecordError(f"{self.path}: cannot create the MCAP file: {err}") from err
         self.writer.write_metadata(METADATA, encode_metadata(metadata))
 
+    def channel(self, topic: str, schema: foxglove.Schema | dict[str, Any],
+                message_encoding: str) -> foxglove.Channel:
+        """A channel of this file, released when the file is closed."""
+        channel = foxglove.Channel(
+            topic, schema=schema, message_encoding=message_encoding, context=self.context
+        )
+        self.channels.append(channel)
+        return channel
+
     def json_channel(self, topic: str, schema: Mapping[str, Any]) -> foxglove.Channel:
         """A JSON channel with a JSON schema (``title`` names the schema)."""
-        return foxglove.Channel(
-            topic, schema=dict(schema), message_encoding="json", context=self.context
-        )
+        return self.channel(topic, dict(schema), "json")
 
     def flush(self) -> None:
         """Close the open chunk and write it to disk."""
@@ -192,6 +200,20 @@ class McapFile:
             self.writer.write_metadata(SUMMARY, encode_metadata(summary))
         finally:
             self.writer.close()
+            self._release_channels()
+
+    def _release_channels(self) -> None:
+        """Close this file's channels and drop them from foxglove's registry.
+
+        ``foxglove.Channel`` registers every channel in a module-level dict that nothing
+        ever empties (foxglove-sdk 0.30), so without this each recorded evaluation would
+        leave its channels behind in a long-lived worker process.
+        """
+        registry = getattr(foxglove.channel, "_channels_by_id", {})
+        for channel in self.channels:
+            registry.pop(channel.id(), None)
+            channel.close()
+        self.channels.clear()
 
 
 def _step_lines(episode: Episode) -> list[bytes]:
@@ -244,9 +266,7 @@ class McapRecorder(RecorderBase):
         self._encoders: dict[tuple[str, ...], TransformEncoder] = {}
         ctx = self.file.context
         self._scene = SceneUpdateChannel(TOPIC_SCENE, context=ctx)
-        self._tf = foxglove.Channel(
-            TOPIC_TF, schema=FrameTransforms.get_schema(), message_encoding="protobuf", context=ctx
-        )
+        self._tf = self.file.channel(TOPIC_TF, FrameTransforms.get_schema(), "protobuf")
         self._episode = self.file.json_channel(TOPIC_EPISODE, _EPISODE_SCHEMA)
         self._step = self.file.json_channel(TOPIC_STEP, _STEP_SCHEMA)
         self._curve = self.file.json_channel(TOPIC_CURVE, _CURVE_SCHEMA)
