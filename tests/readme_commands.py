@@ -215,6 +215,8 @@ HOW: dict[str, How] = {
         append="--repeats 1 learner.num_envs=4 learner.rollout_steps=64 "
                "learner.minibatch_size=128"),
     "python bench/record_overhead.py": How(append="--steps 1024 --repeats 1"),
+    "python bench/soak.py --executor local serial ray": How(
+        append="--evals 4 --every 2 --executor serial", says="after the first"),
     "python bench/physics_step.py": How(
         append="--robots robots/four_wheeler.json --seconds 0.5 --arenas 2 --num-envs 4 "
                "--rate-steps 10", says="verdict"),
