@@ -123,7 +123,8 @@ EXCLUDED: dict[str, str] = {
 
 TINY_EVOLUTION = (  # six robots of four to six short batches, episodes ending in every one
     "executor=serial record.rerun=false env.task.t_max=40 learner.num_envs=8 "
-    "learner.rollout_steps=32 learner.epochs=2 ga.population_size=3 ga.robot_budget=6 "
+    "learner.rollout_steps=32 learner.epochs=2 learner.minibatch_size=128 "
+    "ga.population_size=3 ga.robot_budget=6 "
     "ga.schedule.initial=1024 ga.schedule.first=1024 ga.schedule.last=1536"
 )
 TINY_TRAINING = ("learner.num_envs=4 learner.rollout_steps=64 learner.epochs=1 "
@@ -160,7 +161,7 @@ class How:
 
 THROUGHPUT = ("env.task.t_max=50 --steps 256 --robots robots/four_wheeler.json "
               "--arenas clean")  # overrides first: the README line may end in overrides
-SMALL_THROUGHPUT = f"learner.num_envs=16 {THROUGHPUT}"
+SMALL_THROUGHPUT = f"learner.num_envs=16 learner.minibatch_size=128 {THROUGHPUT}"
 ANALYSIS = "analysis"
 HOW: dict[str, How] = {
     # ---- the runs the others read, made first

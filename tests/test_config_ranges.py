@@ -94,6 +94,7 @@ BAD: dict[str, Any] = {
     "learner.max_grad_norm": 0.0,
     "learner.hidden[]": 0,
     "learner.init_log_std": 5.0,
+    "learner.policy_out_gain": -1.0,
     "learner.eval_episodes": -1,
     "ga.population_size": 1,
     "ga.robot_budget": 2,

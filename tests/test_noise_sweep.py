@@ -72,7 +72,9 @@ def test_reward_scale_divides_by_the_running_std_of_the_discounted_return() -> N
 
 TINY = ["hydra.sweeper.n_trials=2", "noise_sweep.robots=3", "noise_sweep.budget=128",
         "noise_sweep.resamples=20", "learner.num_envs=2", "learner.rollout_steps=64",
-        "env.task.t_max=40", "executor=serial"]
+        "env.task.t_max=40", "executor=serial",
+        # the shipped space's minibatches (256-2048) exceed this batch of 2 x 64
+        "hydra.sweeper.params.learner.minibatch_size=choice(64,128)"]
 """Two trials of 3 robots x 2 seeds x 128 env steps, over the shipped search space."""
 
 
