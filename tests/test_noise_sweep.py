@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -74,7 +75,7 @@ TINY = ["hydra.sweeper.n_trials=2", "noise_sweep.robots=3", "noise_sweep.budget=
         "noise_sweep.resamples=20", "learner.num_envs=2", "learner.rollout_steps=64",
         "env.task.t_max=40", "executor=serial",
         # the shipped space's minibatches (256-2048) exceed this batch of 2 x 64
-        "hydra.sweeper.params.learner.minibatch_size=choice(64,128)"]
+        "learner.minibatch_size=choice(64,128)"]
 """Two trials of 3 robots x 2 seeds x 128 env steps, over the shipped search space."""
 
 
@@ -111,7 +112,9 @@ def test_the_sweep_runs_trials_and_a_rerun_continues_the_study(
     again = subprocess.run(command, cwd=REPO, env=environment(), capture_output=True, text=True,
                            timeout=300)
     assert again.returncode == 0, again.stderr[-3000:]
-    assert "1 of 2 trials complete" in again.stderr or "2 of 2" in again.stderr, again.stderr
+    # 1 of 2, or 0 of 2 when the signal came between the trial's files and the study's
+    # record of it: that trial is then asked again and reuses its trainings (below).
+    assert re.search(r"noise sweep: [01] of 2 trials complete", again.stderr), again.stderr
     table = trials_table(sweep_dir)
     assert (table["state"] == "COMPLETE").sum() == 2, table
     assert len(finished_trials(sweep_dir)) >= 2
