@@ -2,7 +2,8 @@
 
 Each is a tiny serial run of a paper experiment; the test checks that the code of the
 day gives the same history (early rejection off must change nothing). Regenerate them
-only after a change meant to alter the numbers, and say why in the commit:
+only after a change meant to alter the numbers, and say why in the commit, or to record
+them with another machine's arithmetic (``numerics.txt``, ``tests/numerics.py``):
 
     python tests/data/golden/make_golden.py
 """
@@ -17,9 +18,13 @@ from pathlib import Path
 
 import pandas as pd
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import numerics  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
-TINY = ["ga.population_size=3", "ga.robot_budget=6", "ga.schedule.initial=512",
+POPULATION = 3
+TINY = [f"ga.population_size={POPULATION}", "ga.robot_budget=6", "ga.schedule.initial=512",
         "ga.schedule.first=512", "ga.schedule.last=768", "learner.num_envs=4",
         "learner.rollout_steps=64", "learner.epochs=1", "learner.minibatch_size=128",
         "learner.hidden=[32,32]", "env.task.t_max=40", "executor=serial", "record=off"]
@@ -53,3 +58,4 @@ if __name__ == "__main__":
         for name in RUNS:
             history(name, Path(tmp)).to_csv(HERE / f"{name}.csv", index=False)
             print(HERE / f"{name}.csv")
+    print(numerics.stamp(HERE))
