@@ -142,7 +142,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
               timeout_s=ga.eval_timeout_s, early=ga.early_rejection)
-    warn_if_failures_cannot_end(min(ga.budgets()), "ga.schedule", learner, job.env)
+    warn_if_failures_cannot_end(ga.smallest_budget(), "ga.schedule", learner, job.env)
     executor = executor_of(cfg)  # last: Ray starts here
     return EvolveParts(ga, strategy, job, executor)
 
