@@ -260,7 +260,7 @@ class RunLog:
     every history row as a birth, and at the end the best robots' geometry."""
 
     EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error",
-             "status")
+             "status", "inherited_from")
     """The history columns a birth carries beside its fitness and population figures."""
 
     def __init__(self, store: RunStore, record: RecordConfig, metadata: dict[str, Any]) -> None:

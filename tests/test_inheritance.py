@@ -18,9 +18,10 @@ import pandas as pd
 import pytest
 import torch
 
-from evo.components.executors import SerialExecutor
+from evo.components.executors import LocalExecutor, SerialExecutor
 from evo.components.ga import BudgetSchedule, Evolve, GAConfig
 from evo.components.inheritance import actuator_origins, policy_start
+from evo.early_rejection import EarlyRejection
 from evo.envs.params import EnvConfig, TaskParams, observation_origins, observation_size
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution
@@ -328,6 +329,7 @@ def killed_in_first_inherited(candidate: Candidate, job: Job) -> Outcome:
     return evaluate(candidate, job)
 
 
+@pytest.mark.slow
 def test_resume_after_a_kill_during_an_inherited_evaluation_gives_the_same_history(
     tmp_path: Path,
 ) -> None:
@@ -356,6 +358,30 @@ def test_resume_after_a_kill_during_an_inherited_evaluation_gives_the_same_histo
         a, b = (load_checkpoint(d / "evals" / f"{name}.pt") for d in (tmp_path / "whole", run_dir))
         for key, value in a.state_dict()["actor"].items():
             assert torch.equal(value, b.state_dict()["actor"][key]), (name, key)
+
+
+@pytest.mark.slow
+def test_worker_processes_inherit_through_the_run_directory_with_early_rejection(
+    tmp_path: Path,
+) -> None:
+    """Two spawned workers (``executor=local``) read the parents' checkpoints from the run
+    directory; with early rejection on, every inheriting offspring is either trained
+    or stopped against its own (halved) budget, none fails."""
+    ga = dataclasses.replace(ga_of("parent", inherited=0.5, population=3, budget=5),
+                             schedule=BudgetSchedule(128, 256, 256, inherited=0.5))
+    job = Job(PhysicsParams(), SHORT, TINY, str(tmp_path),
+              record=RecordConfig(mcap=False, rerun=False),
+              early=EarlyRejection(enabled=True, checkpoints=(0.5,), margin=0.0, last=1))
+    Evolution(RunStore(tmp_path), ga=ga, strategy=Evolve(ga), job=job,
+              executor=LocalExecutor(workers=2), seed=5).run()
+    history = pd.read_csv(tmp_path / "history.csv", dtype={"inherited_from": str},
+                          keep_default_na=False)
+    assert (history["error"] == "").all(), history["error"].tolist()
+    inherited = history[history["inherited_from"] != ""]
+    assert len(inherited) > 0, "no offspring inherited"
+    assert set(inherited["status"]) <= {"trained", "stopped-early"}
+    assert (inherited["budget"] == 128).all(), inherited["budget"].tolist()
+    assert (inherited["env_steps"] <= inherited["budget"] + TINY.frames_per_batch).all()
 
 
 def test_a_missing_parent_checkpoint_fails_the_evaluation_with_its_path(tmp_path: Path) -> None:
