@@ -17,6 +17,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from test_evolution import TINY as EVOLUTION_TINY
+from test_evolution import comparable, killed, main_cmd
+from test_evolution import read_history as read_evolution_history
+from test_evolution import run as run_main
 
 from evo.components.executors import LocalExecutor, SerialExecutor
 from evo.components.ga import BudgetSchedule, Evolve, GAConfig
@@ -33,7 +37,6 @@ from evo.learners.common import (
     load_checkpoint,
     make_policy,
 )
-from evo.learners.ppo import train as train_ppo
 from evo.record import RecordConfig
 from evo.robot import parse_robot, random_robots
 from evo.robot.builder import PhysicsParams, build
@@ -308,54 +311,34 @@ TINY = LearnerConfig(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, 
 SHORT = EnvConfig(task=TaskParams(t_max=40))
 
 
-class Killed(BaseException):
-    """Stands for the process dying during an inherited evaluation."""
-
-
-def killed_in_first_inherited(candidate: Candidate, job: Job) -> Outcome:
-    """``evaluate``, which dies in the middle of the first inherited training."""
-    if candidate.inherit:
-        def dying(robot: Robot, **kwargs: Any) -> Any:
-            assert kwargs["start"] is not None
-            on_curve = kwargs.pop("on_curve")
-
-            def curve(row: dict[str, float]) -> bool:
-                on_curve(row)
-                raise Killed(candidate.name)
-
-            return train_ppo(robot, on_curve=curve, **kwargs)
-
-        return evaluate(candidate, job, learner=dying)
-    return evaluate(candidate, job)
+MAIN_TINY = [*EVOLUTION_TINY, "ga.inheritance=parent",
+             "ga.schedule.inherited=0.5", "executor=serial", "record=off"]
+"""A real, tiny serial evolution through ``python evo/main.py`` with inheritance on."""
 
 
 @pytest.mark.slow
-def test_resume_after_a_kill_during_an_inherited_evaluation_gives_the_same_history(
+def test_a_sigkilled_run_resumes_an_inherited_evaluation_to_the_uninterrupted_history(
     tmp_path: Path,
 ) -> None:
-    ga = ga_of("parent", inherited=0.5, population=3, budget=5)
-    ga = dataclasses.replace(ga, schedule=BudgetSchedule(128, 128, 256, inherited=0.5))
-    whole = history_of(tmp_path / "whole", ga, evaluate=evaluate, learner=TINY, env=SHORT)
-    inherited = whole[whole["inherited_from"] != ""]
-    assert len(inherited) > 0, "no offspring inherited"
+    """SIGKILL at the end of the first offspring's training, before its policy is saved
+    (``bench/kill_resume.py``'s driver); the resumed run trains it again from the same
+    inherited start and ends with the uninterrupted run's history."""
+    whole = tmp_path / "whole"
+    done = run_main(main_cmd(*MAIN_TINY, f"hydra.run.dir={whole}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
     run_dir = tmp_path / "killed"
-    with pytest.raises(Killed):
-        history_of(run_dir, ga, evaluate=killed_in_first_inherited, learner=TINY, env=SHORT)
+    killed("checkpoint", 4, *MAIN_TINY, f"hydra.run.dir={run_dir}", cwd=tmp_path)
     (in_flight,) = json.loads((run_dir / "state.json").read_text())["pending"]
-    assert in_flight["inherit"] and not (run_dir / "evals" / f"{in_flight['name']}.pt").exists()
-    job = Job(PhysicsParams(), SHORT, TINY, str(run_dir),
-              record=RecordConfig(mcap=False, rerun=False))
-    resumed = Evolution(RunStore(run_dir), ga=ga, strategy=Evolve(ga), job=job,
-                        executor=SerialExecutor(), seed=99)
-    resumed.resume()
-    resumed.run()
-    again = pd.read_csv(run_dir / "history.csv", dtype={"inherited_from": str},
-                        keep_default_na=False)
-    pd.testing.assert_frame_equal(again.drop(columns="wall_seconds"),
-                                  whole.drop(columns="wall_seconds"))
-    # The inherited offspring ends with the same weights as in the uninterrupted run.
-    for name in inherited["name"]:
-        a, b = (load_checkpoint(d / "evals" / f"{name}.pt") for d in (tmp_path / "whole", run_dir))
+    assert in_flight["birth"] == 3 and in_flight["inherit"], in_flight
+    done = run_main(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    expected, history = comparable(read_evolution_history(whole)), comparable(
+        read_evolution_history(run_dir))
+    inherited = expected[expected["inherited_from"] != ""]["name"]
+    assert len(inherited) >= 1
+    pd.testing.assert_frame_equal(history, expected)
+    for name in inherited:  # trained again from the same start: the same weights
+        a, b = (load_checkpoint(d / "evals" / f"{name}.pt") for d in (whole, run_dir))
         for key, value in a.state_dict()["actor"].items():
             assert torch.equal(value, b.state_dict()["actor"][key]), (name, key)
 
