@@ -287,6 +287,31 @@ def test_inheriting_offspring_are_recorded_with_their_parent_and_smaller_budget(
         assert abs(row.budget - expected) <= 1, row
 
 
+def test_mutated_offspring_inherit_the_modules_that_survived(tmp_path: Path) -> None:
+    """Every offspring is also mutated: each actuator slot it inherits is a parent's
+    actuator of the same type, and some are inherited."""
+    seen: list[Candidate] = []
+
+    def recording(candidate: Candidate, job: Job) -> Outcome:
+        seen.append(candidate)
+        return fitness_of(candidate, job)
+
+    history_of(tmp_path, dataclasses.replace(ga_of("parent"), mutation_rate=1.0),
+               evaluate=recording)
+    mutated = [c for c in seen if c.operator == "crossover+mutation"]
+    assert mutated and all(c.inherit in c.parents for c in mutated)
+    store = RunStore(tmp_path)
+    inherited = 0
+    for c in mutated:
+        child, parent = store.load_robot(c.name), store.load_robot(c.inherit)
+        assert len(c.inherit_actuators) == child.n_actuators
+        for j, k in enumerate(c.inherit_actuators):
+            if k >= 0:
+                inherited += 1
+                assert (j < child.n_motors) == (k < parent.n_motors), (c.name, j, k)
+    assert inherited > 0
+
+
 def test_history_rows_of_older_runs_read_as_not_inherited() -> None:
     row = HistoryRow(0, "r", "E+L", (), "random", 1, 1, -1.0, True, "", 1, 1, 0.0, "", -1.0,
                      -1.0, "trained", float("nan"))

@@ -281,8 +281,9 @@ def surviving_origins(before: Robot, after: Robot, origins: Origins | None = Non
     (by default: ``before`` is parent 0 itself).
 
     No mutation operator moves a subtree (children are addressed by face), so a module
-    survives a mutation when ``after`` has a module of the same type at the same path;
-    one whose type changed, or one grown new, has no origin.
+    survives a mutation when ``after`` has a module of the same type at the same path
+    (a turned one too: it keeps its slots, its axle or hinge turned with it); one whose
+    type changed, or one grown new, has no origin.
     """
     old = {p.path: p.node.type for p in walk(before.root)}
     base = origins if origins is not None else {path: (0, path) for path in old}
