@@ -326,8 +326,9 @@ def test_bad_inheritance_settings_are_named() -> None:
         GAConfig(inheritance="lamarck")
     with pytest.raises(ValueError, match="inherited must be in"):
         BudgetSchedule(inherited=0.0)
-    assert ga_of("parent", inherited=0.25).smallest_budget() == 50
-    assert ga_of("off", inherited=0.25).smallest_budget() == 100
+    on, off = ga_of("parent", inherited=0.25), ga_of("off", inherited=0.25)
+    assert off.expected_budgets() == off.budgets() and min(off.budgets()) == 100
+    assert on.expected_budgets()[:4] == on.budgets()[:4] and min(on.expected_budgets()) == 50
 
 
 # ---- real training: the worker reads the parent's checkpoint; resume --------------------

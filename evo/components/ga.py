@@ -316,13 +316,16 @@ class GAConfig:
         fresh = RandomStructures(generator or GeneratorParams(), limits or Limits())
         return STRUCTURES[self.structure](self, fresh)
 
-    def smallest_budget(self) -> int:
-        """The smallest training budget of the run: an inheriting offspring's, if any."""
+    def expected_budgets(self) -> list[int]:
+        """:meth:`budgets` as the run is expected to spend them: with ``inheritance`` on,
+        an offspring's is its inherited share (a random fallback, which has no parent,
+        trains for the whole; the progress bar's estimate and the start-up checks need
+        no more)."""
         budgets = self.budgets()
-        offspring = budgets[self.population_size:]
-        if self.inheritance != "off" and offspring:
-            return min(*budgets, self.schedule.inherited_budget(min(offspring)))
-        return min(budgets)
+        if self.inheritance == "off":
+            return budgets
+        return budgets[:self.population_size] + [
+            self.schedule.inherited_budget(b) for b in budgets[self.population_size:]]
 
     def budgets(self) -> list[int]:
         """The training budget of every robot of the run, in birth order."""
