@@ -59,11 +59,13 @@ DEFAULT_POPULATION = 20
 """``ga.population_size`` of the GA config, for a config that does not say."""
 EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
     "scheduled_budget", "operator", "replaced", "episodes", "wall_seconds", "error",
-    "eval_seed", "status", "predicted", "curve_source",
+    "eval_seed", "status", "predicted", "curve_source", "inherited_from",
 )
 """``status``: ``trained``, ``stopped-early`` (early rejection: its fitness covers part of
 its budget) or ``failed``, from history.csv (derived from ``error`` for runs recorded
-before the column existed); ``predicted``: the rule's prediction for a stopped robot."""
+before the column existed); ``predicted``: the rule's prediction for a stopped robot;
+``inherited_from``: the parent whose policy its training started from (``ga.inheritance``;
+"" for none and in runs recorded before the column existed)."""
 RUN_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "population_size", "robots", "complete", "status",
     "curves_mcap", "curves_csv", "curves_missing", "path",
@@ -289,6 +291,7 @@ def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd
         "status": text("status").where(text("status") != "", np.where(
             text("error") != "", "failed", "trained")),
         "predicted": number("predicted"),
+        "inherited_from": text("inherited_from"),
     })
     return table.sort_values("birth").reset_index(drop=True)
 

@@ -25,7 +25,7 @@ from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
 from evo.interrupt import critical, raised
 from evo.learners import Learner, get_learner
-from evo.learners.common import LearnerConfig, save_checkpoint
+from evo.learners.common import Inheritance, LearnerConfig, load_checkpoint, save_checkpoint
 from evo.learners.rollouts import play
 from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
 from evo.robot.builder import PhysicsParams
@@ -66,6 +66,11 @@ class Candidate:
         operator: How the robot was made (random, crossover, ...).
         threshold: The population minimum it was bred against, which it must beat to
             enter the population (NaN when it enters anyway: an initial robot).
+        inherit: The parent whose trained policy it starts from ("" for none:
+            ``ga.inheritance`` off, or a robot without parents); its checkpoint is the
+            run's ``evals/<inherit>.pt``.
+        inherit_actuators: For each of its actuators, the parent's actuator it follows,
+            or -1 (``evo.components.inheritance.PolicyStart``).
     """
 
     birth: int
@@ -76,6 +81,8 @@ class Candidate:
     parents: tuple[str, ...] = ()
     operator: str = "random"
     threshold: float = float("nan")
+    inherit: str = ""
+    inherit_actuators: tuple[int, ...] = ()
 
 
 class EvaluationTimeout(RuntimeError):
@@ -172,6 +179,19 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
     return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
 
 
+def inheritance(candidate: Candidate, layout: RunLayout) -> Inheritance | None:
+    """The parent's policy ``candidate`` starts from, read from the run directory
+    (``evals/<parent>.pt``), or None when it starts from scratch.
+
+    Raises:
+        ValueError: The parent's checkpoint is missing or unreadable (naming it).
+    """
+    if not candidate.inherit:
+        return None
+    parent = load_checkpoint(layout.policy(candidate.inherit))
+    return Inheritance(parent, candidate.inherit_actuators)
+
+
 def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Learner,
                       start: float) -> Outcome:
     layout = RunLayout(Path(job.run_dir))
@@ -204,6 +224,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
             robot, physics=job.physics, env=job.env, config=job.learner, budget=candidate.budget,
             seed=candidate.seed, on_curve=on_curve,
             on_episode=sampler if job.record.enabled else None,
+            start=inheritance(candidate, layout),
         )
         sampler.finish()
         if job.record.enabled:  # one deterministic episode, as `evo.replay` re-plays it

@@ -8,6 +8,11 @@ With one worker this is the paper's loop; with more it is an asynchronous steady
 When breeding finds no new valid child (parents too small to cross over, or a converged
 population), the next robot is a fresh random one (operator ``random-fallback``).
 
+With ``ga.inheritance`` on, an offspring's training starts from the trained policy of
+one of its parents (``evo.components.inheritance``): its candidate names the parent and
+the slot map, so a worker reads the parent's checkpoint from the run directory and a
+robot in flight restarts from the same policy on resume.
+
 Resumable: the whole state (population, history, breeding RNG, next birth, robots in
 flight) is saved by the run's store (``evo.run.store.RunStore``) after every submission
 and every result, before anything else. ``Evolution.resume`` reloads it: finished robots
@@ -28,6 +33,7 @@ import numpy as np
 
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, Member, Offspring, StructureStrategy
+from evo.components.inheritance import PolicyStart, policy_start
 from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
 from evo.interrupt import critical
 from evo.record import RecordConfig
@@ -142,6 +148,9 @@ class Evolution:
         self.store.save_robot(name, offspring.robot)
         self.next_birth += 1
         budget = self.ga.schedule.budget(birth, self.ga.population_size, self.ga.robot_budget)
+        start = self._policy_start(offspring)
+        if start is not None:
+            budget = self.ga.schedule.inherited_budget(budget)
         full = len(self.population) >= self.ga.population_size
         threshold = min(m.fitness for m in self.population) if full else math.nan
         return Candidate(
@@ -153,7 +162,18 @@ class Evolution:
             offspring.parents,
             offspring.operator,
             threshold,
+            start.parent if start is not None else "",
+            start.actuators if start is not None else (),
         )
+
+    def _policy_start(self, offspring: Offspring) -> PolicyStart | None:
+        """The parent's policy ``offspring`` starts from (``ga.inheritance``), or None.
+        Its parents are members of the population: it was just bred from them."""
+        if self.ga.inheritance == "off" or not offspring.parents:
+            return None
+        robots = {m.name: m.robot for m in self.population}
+        parents = [(name, robots[name]) for name in offspring.parents]
+        return policy_start(self.ga.inheritance, offspring.robot, parents, offspring.origins)
 
     def _record(self, candidate: Candidate, outcome: Outcome) -> None:
         """Apply replacement, append the history row, save the state."""
@@ -189,6 +209,7 @@ class Evolution:
                     else "stopped-early" if outcome.stopped_early else "trained"),
             predicted=outcome.predicted,
             threshold=candidate.threshold,
+            inherited_from=candidate.inherit,
         )
         self.history.append(row)
         self.pending = [t for t in self.pending if t.birth != candidate.birth]
@@ -239,7 +260,7 @@ class RunLog:
     every history row as a birth, and at the end the best robots' geometry."""
 
     EXTRA = ("method", "parents", "operator", "budget", "env_steps", "wall_seconds", "error",
-             "status")
+             "status", "inherited_from")
     """The history columns a birth carries beside its fitness and population figures."""
 
     def __init__(self, store: RunStore, record: RecordConfig, metadata: dict[str, Any]) -> None:

@@ -142,7 +142,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
               timeout_s=ga.eval_timeout_s, early=ga.early_rejection)
-    warn_if_failures_cannot_end(min(ga.budgets()), "ga.schedule", learner, job.env)
+    warn_if_failures_cannot_end(min(ga.expected_budgets()), "ga.schedule", learner, job.env)
     executor = executor_of(cfg)  # last: Ray starts here
     return EvolveParts(ga, strategy, job, executor)
 
@@ -165,7 +165,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     saved = _state_to_continue(store, resuming)
     if resuming:
         lock.claim()
-    budgets = parts.ga.budgets()
+    budgets = parts.ga.expected_budgets()
     log: RunLog | None = None
     evolution: Evolution | None = None
     try:

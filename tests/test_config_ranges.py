@@ -102,6 +102,7 @@ BAD: dict[str, Any] = {
     "ga.schedule.initial": 0,
     "ga.schedule.first": 0,
     "ga.schedule.last": 0,
+    "ga.schedule.inherited": 0.0,
     "ga.crossover_tries": 0,
     "ga.parent_tries": 0,
     "ga.mutation_rate": 1.5,

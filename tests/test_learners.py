@@ -10,14 +10,22 @@ import pandas as pd
 import pytest
 import torch
 
+from evo.components.inheritance import policy_start
 from evo.edge import compose_config, training_parts
 from evo.envs.params import EnvConfig, TaskParams, observation_size
 from evo.learners import get_learner
-from evo.learners.common import LearnerConfig, load_checkpoint, make_policy, save_checkpoint
+from evo.learners.common import (
+    Inheritance,
+    LearnerConfig,
+    load_checkpoint,
+    make_policy,
+    save_checkpoint,
+)
 from evo.learners.ppo import train as train_ppo
 from evo.learners.rollouts import evaluate_policy
-from evo.robot import load_robot
+from evo.robot import load_robot, parse_robot
 from evo.robot.builder import PhysicsParams
+from evo.robot.operators import surviving_origins
 
 FOUR_WHEELER = load_robot("robots/four_wheeler.json")
 OBS = observation_size(FOUR_WHEELER, TaskParams())
@@ -173,3 +181,29 @@ def test_collector_sampler_draws_from_the_actor_distribution_with_its_log_prob()
     torch.testing.assert_close(actions.mean(0), out["loc"][:4], atol=0.03, rtol=0)
     torch.testing.assert_close(actions.std(0), torch.full((4, 3), np.exp(-0.7)), atol=0.02,
                                rtol=0)
+
+
+def test_an_inherited_offspring_starts_better_than_a_fresh_policy(ppo_run) -> None:  # noqa: ANN001
+    """An offspring of the trained four-wheeler (the same modules, and a passive block
+    grown on the brain's side) that starts from the parent's policy gains more reward in
+    its first collector batch than a fresh policy on the same body, under the same seed."""
+    child = parse_robot({**FOUR_WHEELER.to_dict(), "root": {**FOUR_WHEELER.to_dict()["root"],
+                         "children": [*FOUR_WHEELER.to_dict()["root"]["children"],
+                                      {"face": 2, "rotation": 0, "module": {"type": "main"}}]}},
+                        source="child")
+    start = policy_start("parent", child, [("parent", FOUR_WHEELER)],
+                         surviving_origins(FOUR_WHEELER, child))
+    assert start is not None and start.actuators == (0, 1, 2)
+
+    def first_batch(inheritance: Inheritance | None) -> pd.Series:
+        result = train_ppo(child, physics=PHYSICS, env=NEAR, config=SMALL,
+                           budget=SMALL.frames_per_batch, seed=4, start=inheritance)
+        return result.curve.iloc[0]
+
+    inherited = first_batch(Inheritance(ppo_run.policy, start.actuators))
+    fresh = first_batch(None)
+    reward = [sum(row[f"train/reward/{t}"] for t in ("time", "approach", "success"))
+              for row in (inherited, fresh)]
+    assert reward[0] > reward[1] + 1e-3, (reward, inherited["train/episodes"])
+    assert inherited["train/reward/approach"] > 2 * fresh["train/reward/approach"], (
+        inherited["train/reward/approach"], fresh["train/reward/approach"])

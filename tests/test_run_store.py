@@ -48,16 +48,20 @@ def test_history_reads_back_what_it_wrote_and_old_files_without_threshold(
     tmp_path: Path,
 ) -> None:
     rows = [row(0, 0.5), row(1, 0.25),
-            row(2, 0.75, ("robot-0", "robot-1"), threshold=0.25, predicted=0.6)]
+            row(2, 0.75, ("robot-0", "robot-1"), threshold=0.25, predicted=0.6,
+                inherited_from="robot-1")]
     path = write_history(tmp_path / "history.csv", rows)
     table = read_history(path)
-    assert tuple(table.columns) == HISTORY_COLUMNS and HISTORY_COLUMNS[-1] == "threshold"
+    assert tuple(table.columns) == HISTORY_COLUMNS and HISTORY_COLUMNS[-1] == "inherited_from"
     back = [HistoryRow.from_record(r) for r in table.to_dict("records")]
     assert back[2] == rows[2] and back[0].parents == () and math.isnan(back[0].threshold)
-    table.drop(columns=["threshold", "status", "predicted"]).to_csv(path, index=False)
+    assert back[0].inherited_from == "" and back[2].inherited_from == "robot-1"
+    table.drop(columns=["threshold", "status", "predicted", "inherited_from"]).to_csv(
+        path, index=False)
     old = [HistoryRow.from_record(r) for r in read_history(path).to_dict("records")]
     assert [r.name for r in old] == [r.name for r in rows]
-    assert all(math.isnan(r.threshold) and r.status == "trained" for r in old)
+    assert all(math.isnan(r.threshold) and r.status == "trained" and r.inherited_from == ""
+               for r in old)
 
 
 def test_summaries_read_back_what_they_wrote(tmp_path: Path) -> None:
@@ -108,7 +112,8 @@ def test_a_run_made_by_an_earlier_version_resumes_to_its_whole_history(tmp_path:
     assert done.returncode == 0, done.stderr[-3000:]
     history = read_history(run_dir / "history.csv")
     whole = read_history(OLD_RUN / "whole_history.csv")
-    assert list(history.columns) == [*whole.columns, "threshold"]
+    assert list(history.columns) == [*whole.columns, "threshold", "inherited_from"]
+    assert history["inherited_from"].isna().all(), "no robot inherits by default"
     kept = whole[whole["birth"] < 4].drop(columns=["wall_seconds"])
     pd.testing.assert_frame_equal(history[whole.columns].drop(columns=["wall_seconds"])[:4],
                                   kept, obj="the rows the stopped run had saved")

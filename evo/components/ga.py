@@ -8,7 +8,8 @@
   only if it is strictly fitter.
 * ``BudgetSchedule``: training budget per evaluation: ``initial`` env steps for the
   initial robots, then rising linearly from ``first`` for the first offspring to
-  ``last`` for the last one (paper section 7: 50k -> 250k).
+  ``last`` for the last one (paper section 7: 50k -> 250k); an offspring that starts
+  from a parent's policy (``ga.inheritance``) gets ``inherited`` times that.
 * ``Evolve`` (structure strategy ``E``): two parents by selection, one offspring by
   subtree crossover (optionally mutated). ``RandomStructures`` (``R``): every new robot is
   a fresh random structure, no parents.
@@ -24,15 +25,18 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from evo.checks import at_least, positive
+from evo.checks import at_least, positive, within
+from evo.components.inheritance import INHERITANCE_MODES
 from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
     GeneratorParams,
     OperatorError,
+    Origins,
     crossover,
     mutate,
     random_robot,
+    surviving_origins,
 )
 from evo.robot.tree import Robot
 from evo.robot.validate import Limits
@@ -112,14 +116,18 @@ class BudgetSchedule:
         initial: Budget of every robot of the initial population, env steps.
         first: Budget of the first offspring, env steps.
         last: Budget of the last offspring, env steps (linear in between).
+        inherited: The share of its scheduled budget an offspring gets when it starts
+            from a parent's policy (``ga.inheritance``; 1 = the same budget).
     """
 
     initial: int = 50_000
     first: int = 50_000
     last: int = 250_000
+    inherited: float = 1.0
 
     def __post_init__(self) -> None:
         at_least(self, 1, "initial", "first", "last", note=" env step")
+        within(self, 1e-3, 1.0, "inherited", note=" (a share of the scheduled budget)")
         if self.last < self.first:
             raise ValueError(f"last ({self.last}) must be >= first ({self.first}): budgets "
                              "rise (or stay) over the offspring, as in the paper")
@@ -134,17 +142,30 @@ class BudgetSchedule:
         frac = (birth - population_size) / (offspring - 1)
         return round(self.first + (self.last - self.first) * min(frac, 1.0))
 
+    def inherited_budget(self, budget: int) -> int:
+        """The budget of an offspring scheduled ``budget`` env steps that inherits."""
+        return max(1, round(budget * self.inherited))
+
 
 # ---- structure strategies -------------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
 class Offspring:
-    """A new robot and where it came from."""
+    """A new robot and where it came from.
+
+    Attributes:
+        robot: The new robot.
+        parents: The parents' names (none for a random robot).
+        operator: How it was made.
+        origins: Which module of which parent (an index of ``parents``) each of its
+            modules came from (``evo.robot.operators.Origins``; empty for a random robot).
+    """
 
     robot: Robot
     parents: tuple[str, ...] = ()
     operator: str = "random"
+    origins: Origins = field(default_factory=dict)
 
 
 class StructureStrategy(Protocol):
@@ -210,11 +231,14 @@ class Evolve:
             if not novel:
                 continue
             child = novel[int(rng.integers(len(novel)))]
+            origins = result.origins[result.offspring.index(child)]
             operator = "crossover"
             if ga.mutation_rate and rng.random() < ga.mutation_rate:
+                crossed = child
                 child = mutate(child, rng, ga.mutation_operators, self.fresh.generator, limits)
+                origins = surviving_origins(crossed, child, origins)
                 operator = "crossover+mutation"
-            return Offspring(child, (a.name, b.name), operator)
+            return Offspring(child, (a.name, b.name), operator, origins)
         raise OperatorError(f"no valid offspring from {ga.parent_tries} parent pairs")
 
 
@@ -245,6 +269,8 @@ class GAConfig:
         mutation_operators: Which mutation operators may be used (``E``).
         eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
         early_rejection: When an offspring's training may stop early.
+        inheritance: Whether an offspring's policy starts from a parent's, a key of
+            :data:`evo.components.inheritance.INHERITANCE_MODES` (``off``: from scratch).
     """
 
     population_size: int = 20
@@ -259,6 +285,7 @@ class GAConfig:
     mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
     eval_timeout_s: float = 0.0
     early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
+    inheritance: str = "off"
 
     def __post_init__(self) -> None:
         at_least(self, 2, "population_size")
@@ -274,6 +301,9 @@ class GAConfig:
                              f"{self.structure!r}")
         if not 0 <= self.mutation_rate <= 1:
             raise ValueError(f"mutation_rate must be in [0, 1], got {self.mutation_rate}")
+        if self.inheritance not in INHERITANCE_MODES:
+            raise ValueError(f"inheritance: expected one of {', '.join(INHERITANCE_MODES)}, "
+                             f"got {self.inheritance!r}")
         unknown = set(self.mutation_operators) - set(MUTATIONS)
         if unknown:
             raise ValueError(f"unknown mutation operators {sorted(unknown)}; expected some of "
@@ -285,6 +315,17 @@ class GAConfig:
         within ``limits`` (the ``morphology`` group; defaults when None)."""
         fresh = RandomStructures(generator or GeneratorParams(), limits or Limits())
         return STRUCTURES[self.structure](self, fresh)
+
+    def expected_budgets(self) -> list[int]:
+        """:meth:`budgets` as the run is expected to spend them: with ``inheritance`` on,
+        an offspring's is its inherited share (a random fallback, which has no parent,
+        trains for the whole; the progress bar's estimate and the start-up checks need
+        no more)."""
+        budgets = self.budgets()
+        if self.inheritance == "off":
+            return budgets
+        return budgets[:self.population_size] + [
+            self.schedule.inherited_budget(b) for b in budgets[self.population_size:]]
 
     def budgets(self) -> list[int]:
         """The training budget of every robot of the run, in birth order."""

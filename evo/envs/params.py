@@ -9,6 +9,7 @@ sizes on a machine without a working OpenGL.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from evo.checks import at_least, positive
@@ -16,6 +17,17 @@ from evo.envs.arena import ArenaParams
 from evo.robot.tree import Robot
 
 REWARD_TERMS = ("time", "approach", "success")
+
+GLOBAL_SLOTS = 9
+"""Observation values before the per-actuator ones: the brain's linear and angular
+velocity (6), the direction to the target (2) and its distance (1)."""
+
+ACTUATOR_SLOTS = 2
+"""Observation values per actuator, in action order (motors, then pivots): its state
+(wheel speed or hinge angle) and its last command."""
+
+UP_SLOTS = 3
+"""Observation values after the per-actuator ones with ``observe_up``: gravity."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,7 +68,34 @@ class TaskParams:
 def observation_size(robot: Robot, task: TaskParams) -> int:
     """Length of the reach task's observation for ``robot``: 9 + 2(m + n), + 3 with
     ``observe_up``."""
-    return 9 + 2 * robot.n_actuators + (3 if task.observe_up else 0)
+    return GLOBAL_SLOTS + ACTUATOR_SLOTS * robot.n_actuators + (UP_SLOTS if task.observe_up else 0)
+
+
+def observation_origins(actuators: Sequence[int], parent_actuators: int,
+                        parent_obs: int) -> list[int]:
+    """Where each observation value of a robot comes from in another robot's observation.
+
+    The layout is ``GLOBAL_SLOTS`` values of the brain, ``ACTUATOR_SLOTS`` per actuator
+    in action order, then what the task adds at the end (``UP_SLOTS`` with
+    ``observe_up``): the global and trailing values mean the same for every body, an
+    actuator's two values follow the actuator.
+
+    Args:
+        actuators: For each actuator of the robot, the other robot's actuator it
+            follows, or -1 for none.
+        parent_actuators: The other robot's actuator count.
+        parent_obs: The other robot's observation size.
+
+    Returns:
+        For each observation value of the robot, the index of the other robot's value it
+        is, or -1 when it has none.
+    """
+    out = list(range(GLOBAL_SLOTS))
+    for k in actuators:
+        out += [GLOBAL_SLOTS + ACTUATOR_SLOTS * k + i if k >= 0 else -1
+                for i in range(ACTUATOR_SLOTS)]
+    tail = GLOBAL_SLOTS + ACTUATOR_SLOTS * parent_actuators
+    return out + list(range(tail, parent_obs))
 
 
 def action_size(robot: Robot) -> int:

@@ -22,7 +22,9 @@ per pivot              2    hinge angle / pivot_range, last command (both in [-1
 gravity (observe_up)   3    unit vector of gravity in the brain frame
 ====================  ====  ===========================================================
 
-Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``).
+Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
+``Robot.actuator_paths``); ``evo.envs.params`` names the layout's parts (``GLOBAL_SLOTS``,
+``ACTUATOR_SLOTS``, ``UP_SLOTS``) and maps it between two bodies (``observation_origins``).
 
 Reward per control step, as named terms (their sum is the reward):
 

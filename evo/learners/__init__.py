@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Protocol
 if TYPE_CHECKING:
     from evo.envs.params import EnvConfig
     from evo.episode import Episode
-    from evo.learners.common import LearnerConfig, TrainResult
+    from evo.learners.common import Inheritance, LearnerConfig, TrainResult
     from evo.robot.builder import PhysicsParams
     from evo.robot.tree import Robot
 
@@ -36,7 +36,8 @@ its end)."""
 
 class Learner(Protocol):
     """Trains ``robot``'s behaviour for ``budget`` env steps; randomness only from
-    ``seed``. ``on_curve`` gets every curve row, ``on_episode`` every episode of arena 0."""
+    ``seed``. ``on_curve`` gets every curve row, ``on_episode`` every episode of arena 0;
+    with ``start`` the networks begin as a parent's (``ga.inheritance``)."""
 
     def __call__(
         self,
@@ -49,6 +50,7 @@ class Learner(Protocol):
         seed: int,
         on_curve: CurveHook | None = None,
         on_episode: EpisodeHook | None = None,
+        start: Inheritance | None = None,
     ) -> TrainResult: ...
 
 

@@ -22,7 +22,7 @@ from torch import nn
 from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOperator
 
 from evo.checks import at_least, within
-from evo.envs.params import action_size
+from evo.envs.params import ACTUATOR_SLOTS, action_size, observation_origins
 from evo.robot.tree import Robot
 
 
@@ -245,6 +245,12 @@ class Policy:
         loc: torch.Tensor = self.head(observation)[0]
         return loc
 
+    @property
+    def value_head(self) -> ValueHead:
+        """The critic's network: observation to state value."""
+        head: ValueHead = self.critic.module
+        return head
+
     def sampler(self) -> GaussianSampler:
         """The exploring actor for collectors (shares the weights)."""
         return GaussianSampler(self.head)
@@ -257,6 +263,81 @@ class Policy:
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
         }
+
+
+@dataclass(frozen=True)
+class Inheritance:
+    """A parent's trained policy for a child to start from (``ga.inheritance``).
+
+    Attributes:
+        parent: The parent's policy (``load_checkpoint`` of its ``evals/<name>.pt``).
+        actuators: For each actuator of the child, in action order, the parent's
+            actuator it follows, or -1 for one without a counterpart there
+            (``evo.components.inheritance.PolicyStart.actuators``).
+    """
+
+    parent: Policy
+    actuators: tuple[int, ...]
+
+
+def _linears(module: nn.Module) -> list[nn.Linear]:
+    return [m for m in module.modules() if isinstance(m, nn.Linear)]
+
+
+@torch.no_grad()
+def inherit(policy: Policy, start: Inheritance) -> None:
+    """Overwrite a fresh ``policy`` with the parent's, slot by slot.
+
+    The networks are MLPs whose first layer reads the observation and whose last layer
+    writes one action per actuator, so a module's slots are columns of the first layers
+    (actor and critic), rows of the actor's last layer and entries of its log standard
+    deviation and of the observation statistics (``evo.envs.params.observation_origins``
+    gives the columns). Every slot with a counterpart takes the parent's values; the
+    hidden layers, the critic's output and the normaliser's sample count are the
+    parent's; a slot without a counterpart keeps the fresh policy's values, as a module
+    of a new robot would (its statistics mean 0 and variance 1, weighed with the
+    parent's count). On an identical body every value is the parent's.
+
+    Raises:
+        ValueError: The two policies differ in hidden layers or in what the task adds
+            to the observation, or an actuator index is out of the parent's range.
+    """
+    parent, actuators = start.parent, start.actuators
+    obs, act = int(policy.head.mlp[0].in_features), int(policy.head.log_std.numel())
+    p_obs, p_act = int(parent.head.mlp[0].in_features), int(parent.head.log_std.numel())
+    shapes = [tuple(x.weight.shape) for x in _linears(policy.head.mlp)[1:-1]]
+    if shapes != [tuple(x.weight.shape) for x in _linears(parent.head.mlp)[1:-1]] or (
+            _linears(policy.head.mlp)[0].out_features
+            != _linears(parent.head.mlp)[0].out_features):
+        raise ValueError("inherit: the parent's policy has other hidden layers "
+                         "(learner.hidden must be the same for parent and child)")
+    if obs - ACTUATOR_SLOTS * act != p_obs - ACTUATOR_SLOTS * p_act:
+        raise ValueError(f"inherit: the parent observes {p_obs} values for {p_act} actuators, "
+                         f"the child {obs} for {act}: other env settings (observe_up)")
+    if len(actuators) != act or not all(-1 <= k < p_act for k in actuators):
+        raise ValueError(f"inherit: {list(actuators)} does not map the child's {act} actuators "
+                         f"to the parent's {p_act}")
+    obs_map = observation_origins(actuators, p_act, p_obs)
+    cols = [i for i, k in enumerate(obs_map) if k >= 0]
+    p_cols = [obs_map[i] for i in cols]
+    rows = [j for j, k in enumerate(actuators) if k >= 0]
+    p_rows = [actuators[j] for j in rows]
+    policy.norm.count.copy_(parent.norm.count)
+    policy.norm.mean[cols] = parent.norm.mean[p_cols]
+    policy.norm.var[cols] = parent.norm.var[p_cols]
+    policy.head.log_std[rows] = parent.head.log_std[p_rows]
+    for mine, theirs, out_rows in ((policy.head.mlp, parent.head.mlp, (rows, p_rows)),
+                                   (policy.value_head.mlp, parent.value_head.mlp, None)):
+        layers, parents = _linears(mine), _linears(theirs)
+        layers[0].weight[:, cols] = parents[0].weight[:, p_cols]
+        layers[0].bias.copy_(parents[0].bias)
+        for layer, source in zip(layers[1:-1], parents[1:-1], strict=True):
+            layer.load_state_dict(source.state_dict())
+        if out_rows is None:
+            layers[-1].load_state_dict(parents[-1].state_dict())
+        else:
+            layers[-1].weight[out_rows[0]] = parents[-1].weight[out_rows[1]]
+            layers[-1].bias[out_rows[0]] = parents[-1].bias[out_rows[1]]
 
 
 def make_policy(obs_size: int, action_size: int, config: LearnerConfig) -> Policy:

@@ -38,7 +38,15 @@ from torchrl.objectives.value import GAE
 from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
 from evo.learners import CurveHook, EpisodeHook
-from evo.learners.common import LearnerConfig, Policy, RunningNorm, TrainResult, make_policy
+from evo.learners.common import (
+    Inheritance,
+    LearnerConfig,
+    Policy,
+    RunningNorm,
+    TrainResult,
+    inherit,
+    make_policy,
+)
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -114,6 +122,7 @@ def train(
     seed: int,
     on_curve: CurveHook | None = None,
     on_episode: EpisodeHook | None = None,
+    start: Inheritance | None = None,
 ) -> TrainResult:
     """Train ``robot``'s behaviour for ``budget`` env steps (or only collect, if
     ``config.update`` is false) and return its fitness, curve and policy.
@@ -121,13 +130,16 @@ def train(
     Randomness comes only from ``seed`` (targets, rocks, network initialisation, action
     noise, minibatch order); torch's global generator is left as it was. ``on_curve``
     gets every curve row (and stops training after a batch when it returns True),
-    ``on_episode`` every episode of arena 0 frame by frame.
+    ``on_episode`` every episode of arena 0 frame by frame. With ``start`` the networks
+    begin as a parent's, slot-mapped onto this body (``evo.learners.common.inherit``);
+    the fresh networks are drawn first all the same, so the rest of the seed's random
+    numbers do not depend on it.
     """
     if budget < 1:
         raise ValueError(f"budget must be >= 1 env step, got {budget}")
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return _train(robot, physics, env, config, budget, seed, on_curve, on_episode)
+        return _train(robot, physics, env, config, budget, seed, on_curve, on_episode, start)
 
 
 def _objective(
@@ -194,6 +206,7 @@ def _train(
     seed: int,
     on_curve: CurveHook | None,
     on_episode: EpisodeHook | None,
+    inheritance: Inheritance | None = None,
 ) -> TrainResult:
     start = time.perf_counter()
     env = make_env(robot, physics, env_config, config.num_envs, seed)
@@ -201,6 +214,8 @@ def _train(
         env.core.watch(on_episode)
     policy = make_policy(env.observation_spec["observation"].shape[-1],
                          env.action_spec.shape[-1], config)  # sizes from the env specs
+    if inheritance is not None:
+        inherit(policy, inheritance)
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     collector = Collector(

@@ -237,6 +237,12 @@ def replace_at(root: Node, path: Path, new: Edge | None) -> Node:
 # --- crossover ---------------------------------------------------------------------------
 
 
+Origins = dict[Path, tuple[int, Path]]
+"""Where the modules of a bred robot came from: a module's node path in the child ->
+(which parent, 0 or 1, and its node path there). A module made new (by a mutation)
+has no entry."""
+
+
 @dataclass(frozen=True, slots=True)
 class CrossoverResult:
     """The valid offspring of one subtree crossover and how it was reached.
@@ -245,11 +251,44 @@ class CrossoverResult:
         offspring: The valid children (one or two), T1' first.
         cut: The node paths swapped in the first and second parent.
         tries: How many swaps were drawn before one gave a valid child.
+        origins: For each child of ``offspring``, where each of its modules came from
+            (parent 0 is the first parent, ``a``).
     """
 
     offspring: tuple[Robot, ...]
     cut: tuple[Path, Path]
     tries: int
+    origins: tuple[Origins, ...] = ()
+
+
+def crossover_origins(parents: tuple[Robot, Robot], host: int, cut: Path, graft: Path) -> Origins:
+    """The origins of the child that keeps ``parents[host]``'s tree with its subtree at
+    ``cut`` replaced by the other parent's subtree at ``graft``.
+
+    Subtree surgery keeps every path: a module outside the cut keeps its host path, and
+    the grafted module at ``cut + rest`` was at ``graft + rest`` in the other parent.
+    """
+    donor = 1 - host
+    kept = replace_at(parents[host].root, cut, None)
+    origins: Origins = {p.path: (host, p.path) for p in walk(kept)}
+    for p in walk(subtree_at(parents[donor].root, graft).module):
+        origins[cut + p.path] = (donor, graft + p.path)
+    return origins
+
+
+def surviving_origins(before: Robot, after: Robot, origins: Origins | None = None) -> Origins:
+    """The origins of ``after``, a mutation of ``before`` whose modules had ``origins``
+    (by default: ``before`` is parent 0 itself).
+
+    No mutation operator moves a subtree (children are addressed by face), so a module
+    survives a mutation when ``after`` has a module of the same type at the same path
+    (a turned one too: it keeps its slots, its axle or hinge turned with it); one whose
+    type changed, or one grown new, has no origin.
+    """
+    old = {p.path: p.node.type for p in walk(before.root)}
+    base = origins if origins is not None else {path: (0, path) for path in old}
+    return {p.path: base[p.path] for p in walk(after.root)
+            if old.get(p.path) is p.node.type and p.path in base}
 
 
 def crossover_sites(a: Robot, b: Robot) -> list[tuple[Path, Path]]:
@@ -299,9 +338,12 @@ def crossover(
         path1, path2 = pairs[rng.integers(len(pairs))]
         e1, e2 = subtree_at(a.root, path1), subtree_at(b.root, path2)
         children = (Robot(replace_at(a.root, path1, e2)), Robot(replace_at(b.root, path2, e1)))
-        valid = tuple(c for c in children if is_valid(c.root, limits))
+        valid = [i for i, c in enumerate(children) if is_valid(c.root, limits)]
         if valid:
-            return CrossoverResult(valid, (path1, path2), tries)
+            cuts = ((path1, path2), (path2, path1))
+            return CrossoverResult(
+                tuple(children[i] for i in valid), (path1, path2), tries,
+                tuple(crossover_origins((a, b), i, *cuts[i]) for i in valid))
     raise OperatorError(f"crossover of {a.name} and {b.name}: no valid child in {max_tries} tries")
 
 

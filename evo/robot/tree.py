@@ -287,6 +287,14 @@ class Robot:
         """m + n: one actuator per motor and per pivot (motors first in the model)."""
         return self.n_motors + self.n_pivots
 
+    def actuator_paths(self) -> tuple[Path, ...]:
+        """The node paths of the motors, then of the pivots, each in depth-first order:
+        the order of the model's actuators (``evo.robot.builder``), so of a task's
+        per-actuator slots."""
+        placed = list(walk(self.root))
+        return tuple(p.path for kind in (ModuleType.MOTOR, ModuleType.PIVOT)
+                     for p in placed if p.node.type is kind)
+
     @property
     def depth(self) -> int:
         """Structural depth: edges from the brain to the deepest non-wheel module."""

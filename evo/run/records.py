@@ -63,6 +63,9 @@ class HistoryRow:
         threshold: The population minimum it was bred against, the fitness it had to
             beat to enter (NaN for a robot of the initial population, and in runs
             recorded before the column existed).
+        inherited_from: The parent whose trained policy its training started from
+            (``ga.inheritance``); "" when it started from scratch, and in runs recorded
+            before the column existed.
     """
 
     birth: int
@@ -84,6 +87,7 @@ class HistoryRow:
     status: str
     predicted: float
     threshold: float = math.nan
+    inherited_from: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -109,7 +113,8 @@ class HistoryRow:
     def from_record(cls, row: Mapping[str, Any]) -> HistoryRow:
         """The row ``record()`` wrote, from ``state.json`` or a row of :func:`read_history`
         (an empty text cell, read as NaN, is ""); a run from before ``status``,
-        ``predicted`` and ``threshold`` existed gets ``trained``/``failed``, NaN and NaN.
+        ``predicted``, ``threshold`` and ``inherited_from`` existed gets
+        ``trained``/``failed``, NaN, NaN and "".
 
         Raises:
             KeyError, TypeError, ValueError: A missing column or a value of the wrong type.
@@ -136,6 +141,7 @@ class HistoryRow:
             status=_text(row.get("status")) or ("failed" if error else "trained"),
             predicted=float(row.get("predicted", math.nan)),
             threshold=float(row.get("threshold", math.nan)),
+            inherited_from=_text(row.get("inherited_from")),
         )
 
 
@@ -149,7 +155,7 @@ def _text(value: object) -> str:
 HISTORY_COLUMNS = tuple(f.name for f in dataclasses.fields(HistoryRow))
 """The columns of history.csv, in order (one row per evaluated robot)."""
 
-HISTORY_TEXT_COLUMNS = ("name", "parents", "error", "replaced", "operator")
+HISTORY_TEXT_COLUMNS = ("name", "parents", "error", "replaced", "operator", "inherited_from")
 """The columns of history.csv read as text whatever they hold (an empty cell is NaN)."""
 
 

@@ -130,7 +130,8 @@ class RunStore:
         try:
             np.random.default_rng().bit_generator.state = state["rng"]
             history = [HistoryRow.from_record(row) for row in state["history"]]
-            pending = [Candidate(**{**t, "parents": tuple(t["parents"])})
+            pending = [Candidate(**{**t, "parents": tuple(t["parents"]),
+                                     "inherit_actuators": tuple(t.get("inherit_actuators", ()))})
                        for t in state["pending"]]
             fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
             seed, next_birth = int(state["seed"]), int(state["next_birth"])
