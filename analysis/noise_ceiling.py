@@ -490,9 +490,12 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
                 _write_progress(out, wall_before + time.perf_counter() - start)
                 log(f"{len(rows)}/{len(plan)} {training.name}: fitness {outcome.fitness:+.3f} "
                     f"({outcome.env_steps:,} env steps, {outcome.wall_seconds:.0f} s)")
+    except BaseException:  # a signal or an error: stop the trainings now, not at their end
+        executor.terminate()
+        raise
     finally:
-        executor.shutdown()
         _write_progress(out, wall_before + time.perf_counter() - start)
+    executor.shutdown()
     return pd.DataFrame(rows, columns=list(TRAINING_COLUMNS))
 
 

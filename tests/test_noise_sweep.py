@@ -127,6 +127,37 @@ def test_the_sweep_runs_trials_and_a_rerun_continues_the_study(
     assert {"learner.gamma", "learner.epochs", "physics_step"} <= set(table.columns)
 
 
+@pytest.mark.slow
+def test_a_signal_stops_a_trial_whose_trainings_run_in_workers(
+    sweeper: None, tmp_path: Path,
+) -> None:
+    """SIGTERM while a long training runs in the local pool: the sweep ends within
+    seconds (it stops its workers) instead of waiting for the trainings to finish."""
+    sweep_dir = tmp_path / "sweep"
+    command = sweep_command(sweep_dir, "hydra.sweeper.n_trials=1",
+                            "noise_sweep.budget=10000000", "executor=local",
+                            "executor.workers=1")
+    with (tmp_path / "log").open("w") as log:
+        proc = subprocess.Popen(command, cwd=REPO, env=environment(), stdout=log, stderr=log)
+        try:
+            deadline = time.monotonic() + 120
+            while "to run" not in (tmp_path / "log").read_text() and proc.poll() is None:
+                assert time.monotonic() < deadline, (tmp_path / "log").read_text()[-2000:]
+                time.sleep(0.2)
+            time.sleep(5)  # the worker is training
+            proc.send_signal(signal.SIGTERM)
+            sent = time.monotonic()
+            proc.wait(timeout=60)
+            waited = time.monotonic() - sent
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    err = (tmp_path / "log").read_text()
+    assert proc.returncode == 143 and "Traceback" not in err, err[-2000:]
+    assert waited < 20, f"{waited:.0f} s from the signal to the end"
+
+
 # ---------------------------------------------------------------- bad settings
 
 
