@@ -475,10 +475,9 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
                 candidate = Candidate(len(rows) + len(running), training.name,
                             by_name[training.structure].canonical_json(), settings.budget,
                             training.seed, (), "noise-ceiling")
-                job = jobs[training.role]
-                running[executor.submit(evaluate, candidate, job)] = (training, candidate)
-            finished, _ = wait(running, return_when=FIRST_COMPLETED)
-            for future in finished:
+                running[executor.submit(evaluate, candidate, jobs[training.role])] = (
+                    training, candidate)
+            for future in wait(running, return_when=FIRST_COMPLETED).done:
                 training, candidate = running.pop(future)
                 outcome = outcome_of(future, candidate, executor)
                 if outcome.error is not None:
