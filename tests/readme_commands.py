@@ -115,6 +115,9 @@ EXCLUDED: dict[str, str] = {
         "three trials of 32 trainings (about 20 minutes); test_noise_sweep runs two tiny ones",
     "python -m analysis.noise_sweep table runs/noise_sweep":
         "reads the study the sweep above makes; test_noise_sweep reads its tiny study's table",
+    "python -m analysis.inheritance runs/inheritance --out inheritance/":
+        "needs the six runs of +exp=inheritance_laptop; tests/test_analysis_inheritance.py "
+        "runs the tool on small run folders",
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",
