@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean-venv
+.PHONY: demo test test-long lint bench clean-venv
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -21,6 +21,9 @@ test: $(STAMP)
 	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile
 	$(BIN)/ruff check evo analysis tests bench
 	$(BIN)/mypy
+
+test-long: $(STAMP)
+	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile -m long
 
 clean-venv:
 	rm -rf $(VENV)

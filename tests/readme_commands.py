@@ -74,6 +74,7 @@ EXCLUDED: dict[str, str] = {
     "make demo": "a 10-12 minute evolution; test_configs composes +exp=demo and checks "
                  "it is a small evolution, and +exp=smoke runs the same loop below",
     "make test": "the test suite itself",
+    "make test-long": "the suite's long tier (pytest -m long)",
     "python evo/main.py +exp=paper_clean": "the paper's run (100 robots, about 40 minutes); "
                                            "test_configs composes and checks it",
     "python evo/main.py +exp=ablation_paper": "the ablation at the paper's budget (hours); "

@@ -207,7 +207,9 @@ from numerics import assert_same_history  # noqa: E402
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(make_golden.RUNS))
+@pytest.mark.parametrize("name", [  # one paper config by default, every one in the long tier
+    pytest.param(name, marks=[] if name == "paper_clean" else [pytest.mark.long])
+    for name in sorted(make_golden.RUNS)])
 def test_off_by_default_every_paper_config_gives_the_history_of_before(
     tmp_path: Path, name: str
 ) -> None:

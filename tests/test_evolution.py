@@ -488,6 +488,7 @@ def wait_for_rows(path: Path, rows: int, proc: subprocess.Popen[str], timeout: f
 
 @pytest.mark.slow
 @pytest.mark.parametrize("executor", ["local"])
+@pytest.mark.long  # the pool's lost work: test_lost_work; serial: the test above
 def test_sigkilled_run_resumes_with_every_robot_once(tmp_path: Path, executor: str) -> None:
     # The whole process group (main process and its workers) is killed from outside
     # while robots are in training, as an out-of-memory killer or a cluster would.

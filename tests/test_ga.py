@@ -479,6 +479,7 @@ def test_local_executor_gives_the_serial_fitness_and_survives_a_dead_worker(
 
 
 @pytest.mark.slow
+@pytest.mark.long  # Ray starts in the README's soak command
 def test_ray_executor_gives_the_serial_fitness(
     serial_outcomes: list[Outcome], tmp_path: Path
 ) -> None:

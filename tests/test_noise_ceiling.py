@@ -123,6 +123,7 @@ def ceiling_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[st
     return out, names
 
 
+@pytest.mark.long  # trains 12 robots (ceiling_run); the sweep's trials run the same code
 def test_immobile_structures_rank_last_and_seeds_agree(
     ceiling_run: tuple[Path, dict[str, str]],
 ) -> None:
@@ -156,6 +157,7 @@ def test_immobile_structures_rank_last_and_seeds_agree(
     assert "| fitness |" in text and "| fitness_late |" in text
 
 
+@pytest.mark.long  # trains 12 robots (ceiling_run); the sweep's trials run the same code
 def test_the_same_seeds_give_the_same_numbers_and_finished_trainings_are_reused(
     ceiling_run: tuple[Path, dict[str, str]], tmp_path: Path,
 ) -> None:
@@ -179,6 +181,7 @@ def test_the_same_seeds_give_the_same_numbers_and_finished_trainings_are_reused(
     assert summary["metrics"] == json.loads((out / "summary.json").read_text())["metrics"]
 
 
+@pytest.mark.long  # trains 12 robots (ceiling_run); the sweep's trials run the same code
 def test_a_folder_of_other_settings_is_refused(
     ceiling_run: tuple[Path, dict[str, str]], capsys: pytest.CaptureFixture[str],
 ) -> None:
@@ -190,6 +193,7 @@ def test_a_folder_of_other_settings_is_refused(
     assert err.count("\n") == 0 and "budget" in err and str(out) in err
 
 
+@pytest.mark.long  # trains 12 robots (ceiling_run); the sweep's trials run the same code
 def test_the_early_slope_study_reads_a_noise_ceiling_folder(
     ceiling_run: tuple[Path, dict[str, str]],
 ) -> None:
@@ -208,6 +212,7 @@ def test_the_early_slope_study_reads_a_noise_ceiling_folder(
     assert ceiling["icc"] == pytest.approx(written["icc"])
 
 
+@pytest.mark.long  # trains 12 robots (ceiling_run); the sweep's trials run the same code
 def test_the_study_table_gathers_cells(
     ceiling_run: tuple[Path, dict[str, str]], tmp_path: Path,
 ) -> None:

@@ -92,6 +92,7 @@ def finished_trials(sweep_dir: Path) -> list[Path]:
     return sorted(sweep_dir.glob("trials/*/trial.json"))
 
 
+@pytest.mark.long  # a trial through the sweeper: the signal test below
 def test_the_sweep_runs_trials_and_a_rerun_continues_the_study(
     sweeper: None, tmp_path: Path,
 ) -> None:

@@ -133,6 +133,7 @@ def test_a_failing_resume_on_the_command_line_is_one_line_and_changes_nothing(
 
 
 @pytest.mark.slow
+@pytest.mark.long  # in-process: test_a_failing_resume_leaves_every_byte_as_it_was
 def test_resume_without_state_says_what_is_there(serial_reference: Path, tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     shutil.copytree(serial_reference, run_dir)
@@ -291,6 +292,7 @@ time.sleep(600)
 
 
 @pytest.mark.slow
+@pytest.mark.long  # the lock in-process: test_the_lock_refuses_a_second_holder_...
 def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(
     serial_reference: Path, tmp_path: Path
 ) -> None:
@@ -353,6 +355,7 @@ def test_sigterm_stops_the_run_cleanly_and_no_worker_outlives_it(tmp_path: Path)
 
 
 @pytest.mark.slow
+@pytest.mark.long  # SIGTERM's test covers the handler
 def test_sigint_stops_the_run_with_exit_code_130(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     returncode, err, _ = interrupt([*SLOWER, "executor=serial", f"hydra.run.dir={run_dir}"],
@@ -363,6 +366,7 @@ def test_sigint_stops_the_run_with_exit_code_130(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long  # serial SIGKILL and resume: test_evolution
 def test_a_sigtermed_serial_run_resumes_to_the_uninterrupted_history(
     tmp_path: Path, serial_reference: Path
 ) -> None:
@@ -405,6 +409,7 @@ def test_workers_die_with_a_sigkilled_main_process(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long  # the harness's own check; SIGKILL and resume: test_evolution
 def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
     verdict = kill_and_resume(1, seed=1, out=tmp_path / "harness", log=False)
     assert verdict.landed == 1, verdict
