@@ -37,6 +37,7 @@ from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
 from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
+from evo.run.files import full_disk
 
 APPLICATION = "evo"
 REPLAY = "replay"
@@ -117,12 +118,40 @@ def eval_blueprint() -> rrb.Blueprint:
     )
 
 
-def finish_rrd(rec: rr.RecordingStream) -> None:
-    """Write everything logged to ``rec``'s file and close it (with its footer)."""
+FOOTER_END = b"RRF2FOOT"
+"""What a complete ``.rrd`` ends with, but for its last 4 bytes (the footer's version)."""
+
+FLUSH_S = 30.0
+"""Longest wait for rerun to write what was logged, seconds."""
+
+
+def finish_rrd(rec: rr.RecordingStream, path: Path) -> Exception | None:
+    """Write everything logged to ``rec``'s file ``path`` and close it (with its footer).
+
+    rerun writes the file on a thread of its own, which a failed write ends, reported
+    only in rerun's log; waiting for that thread then never returns (rerun 0.41), nor
+    does the process's exit while the stream lives. So on a full disk (or a file-size
+    limit reached) the stream is not waited for, and the reason is returned, an
+    ``evo.run.files.WriteFailed``, as is a flush that timed out: the caller drops its
+    last reference to ``rec`` (``release_streams``), then raises it.
+    """
+    if (full := full_disk(path)) is not None:
+        return full
     try:
-        rec.flush()
-    finally:
-        rec.disconnect()
+        rec.flush(timeout_sec=FLUSH_S)
+    except RuntimeError as err:  # timed out: rerun's writer is stuck
+        return full_disk(path) or RecordError(f"{path}: {err}")
+    rec.disconnect()
+    return None if _has_footer(path) else full_disk(path)
+
+
+def _has_footer(path: Path) -> bool:
+    try:
+        with path.open("rb") as file:
+            file.seek(-(len(FOOTER_END) + 4), 2)
+            return file.read(len(FOOTER_END)) == FOOTER_END
+    except OSError:
+        return False
 
 
 def release_streams() -> None:
@@ -291,7 +320,8 @@ class RerunRecorder(RecorderBase):
             self._send_curve()
             log_text(self.rec, "summary", summary)
         finally:
-            if self._rec is not None:
-                finish_rrd(self._rec)
+            failed = finish_rrd(self._rec, self.path) if self._rec is not None else None
             self._rec = None  # the last reference: rerun may now free the stream
             release_streams()
+            if failed is not None:
+                raise failed
