@@ -121,6 +121,9 @@ def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExec
     except WriteFailed:
         raise  # the disk's fault: the run stops and resumes with the robot in flight
     except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
+        cause = getattr(err, "cause", None)  # Ray wraps a task's error (RayTaskError)
+        if isinstance(cause, WriteFailed):
+            raise WriteFailed(cause.errno, cause.strerror, cause.filename) from err
         return Outcome(candidate.birth, candidate.name, error=first_line(err))
 
 

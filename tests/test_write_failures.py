@@ -58,8 +58,19 @@ def test_a_full_disk_in_an_evaluation_stops_the_run_and_keeps_the_robot_in_fligh
     state = json.loads((tmp_path / "state.json").read_text())
     assert state["history"] == [] and [t["birth"] for t in state["pending"]] == [0]
     assert not (tmp_path / "history.csv").exists(), "no robot was recorded failed"
-    # The evolution loop gets it through the future as the pool would hand it over.
-    future: Future[Any] = Future()
-    future.set_exception(pickle.loads(pickle.dumps(WriteFailed(errno.EDQUOT, "quota", "x"))))
-    with pytest.raises(WriteFailed):
-        outcome_of(future, Candidate(0, "r", "{}", 1, 1), SerialExecutor())
+    # The evolution loop gets it through the future as the pool would hand it over, or
+    # wrapped as Ray hands over a task's error (RayTaskError keeps it as ``cause``).
+    for error in (pickle.loads(pickle.dumps(WriteFailed(errno.EDQUOT, "quota", "x"))),
+                  Wrapped(WriteFailed(errno.EDQUOT, "quota", "x"))):
+        future: Future[Any] = Future()
+        future.set_exception(error)
+        with pytest.raises(WriteFailed, match="cannot write x: quota"):
+            outcome_of(future, Candidate(0, "r", "{}", 1, 1), SerialExecutor())
+
+
+class Wrapped(RuntimeError):
+    """An executor's wrapping of a task's error, as Ray's ``RayTaskError``."""
+
+    def __init__(self, cause: BaseException) -> None:
+        super().__init__(f"task failed:\n{cause}")
+        self.cause = cause
