@@ -1,8 +1,12 @@
 """One evaluation of one robot: train its behaviour, keep its files, report its fitness.
 
 ``evaluate`` runs in a worker process (or a Ray task), so its inputs and outputs are
-plain picklable values. It never raises: a failure comes back as an ``Outcome`` with the
-error, and the evolution loop records it and goes on. The learner is the one the job's
+plain picklable values. A failure of the evaluation comes back as an ``Outcome`` with
+its error in one line (an unexpected exception's traceback goes to
+``evals/<name>.log``), and the evolution loop records it and goes on. A write that
+fails for want of room is not the robot's failure: it raises
+``evo.run.files.WriteFailed``, the run stops, and the robot, still in flight, is
+evaluated again on resume. The learner is the one the job's
 learner config names (``evo.learners.get_learner``) unless the caller passes another.
 """
 
