@@ -143,7 +143,8 @@ def one_line(err: BaseException) -> str:
 
 def first_line(err: BaseException) -> str:
     """``Type: message`` of ``err``, its message cut at the first line break."""
-    return f"{type(err).__name__}: {one_line(err)}".rstrip(": ")
+    message = one_line(err)
+    return f"{type(err).__name__}: {message}" if message else type(err).__name__
 
 
 def error_cell(err: BaseException, candidate: Candidate, job: Job) -> str:
