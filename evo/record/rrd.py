@@ -20,7 +20,9 @@ The default blueprint shows the 3D scene next to tabs of curve plots.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Unpack
@@ -129,13 +131,14 @@ def finish_rrd(rec: rr.RecordingStream, path: Path) -> Exception | None:
     """Write everything logged to ``rec``'s file ``path`` and close it (with its footer).
 
     rerun writes the file on a thread of its own, which a failed write ends, reported
-    only in rerun's log; waiting for that thread then never returns (rerun 0.41), nor
-    does the process's exit while the stream lives. So on a full disk (or a file-size
-    limit reached) the stream is not waited for, and the reason is returned, an
-    ``evo.run.files.WriteFailed``, as is a flush that timed out: the caller drops its
-    last reference to ``rec`` (``release_streams``), then raises it.
+    only in rerun's log; a flush that reaches that thread as it fails never returns
+    (rerun 0.41). So on a full disk (or a file-size limit reached) the stream is not
+    waited for, only given time to fail (:func:`_let_the_writer_fail`), and the reason
+    is returned, an ``evo.run.files.WriteFailed``, as is a flush that timed out: the
+    caller drops its last reference to ``rec`` (``release_streams``), then raises it.
     """
     if (full := full_disk(path)) is not None:
+        _let_the_writer_fail(rec)
         return full
     try:
         rec.flush(timeout_sec=FLUSH_S)
@@ -143,6 +146,35 @@ def finish_rrd(rec: rr.RecordingStream, path: Path) -> Exception | None:
         return full_disk(path) or RecordError(f"{path}: {err}")
     rec.disconnect()
     return None if _has_footer(path) else full_disk(path)
+
+
+WRITER_THREAD = "file_writer"
+"""The name of the thread that writes an ``.rrd`` file (one per open file)."""
+
+
+def _writer_threads() -> int:
+    """How many of this process's threads write ``.rrd`` files (0 where unknown)."""
+    try:
+        tasks = list(Path("/proc/self/task").iterdir())
+    except OSError:
+        return 0
+    count = 0
+    for task in tasks:
+        with contextlib.suppress(OSError):  # a thread that ended meanwhile
+            count += (task / "comm").read_text().strip() == WRITER_THREAD
+    return count
+
+
+def _let_the_writer_fail(rec: rr.RecordingStream, wait_s: float = 2.0) -> None:
+    """On a full disk rerun's writer thread ends at its next write; a flush (a dropped
+    stream flushes too) that reaches it before it ends then waits forever (rerun
+    0.41). So hand it what is left without waiting, and wait, ``wait_s`` at most, for
+    a writer thread to end, before the caller drops the stream."""
+    before = _writer_threads()
+    rec.flush(timeout_sec=0.0)
+    deadline = time.monotonic() + wait_s
+    while _writer_threads() >= before and time.monotonic() < deadline:
+        time.sleep(0.01)
 
 
 def _has_footer(path: Path) -> bool:
