@@ -20,9 +20,8 @@ The default blueprint shows the 3D scene next to tabs of curve plots.
 
 from __future__ import annotations
 
-import contextlib
+import ctypes
 import json
-import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Unpack
@@ -123,58 +122,46 @@ def eval_blueprint() -> rrb.Blueprint:
 FOOTER_END = b"RRF2FOOT"
 """What a complete ``.rrd`` ends with, but for its last 4 bytes (the footer's version)."""
 
-FLUSH_S = 30.0
+FLUSH_S = 10.0
 """Longest wait for rerun to write what was logged, seconds."""
+
+_abandoned: list[rr.RecordingStream] = []  # streams whose writer failed (:func:`_abandon`)
 
 
 def finish_rrd(rec: rr.RecordingStream, path: Path) -> Exception | None:
     """Write everything logged to ``rec``'s file ``path`` and close it (with its footer).
 
     rerun writes the file on a thread of its own, which a failed write ends, reported
-    only in rerun's log; a flush that reaches that thread as it fails never returns
-    (rerun 0.41). So on a full disk (or a file-size limit reached) the stream is not
-    waited for, only given time to fail (:func:`_let_the_writer_fail`), and the reason
-    is returned, an ``evo.run.files.WriteFailed``, as is a flush that timed out: the
-    caller drops its last reference to ``rec`` (``release_streams``), then raises it.
+    only in rerun's log. On a full disk (or a file-size limit reached), or when the
+    flush does not end, the stream is abandoned (:func:`_abandon`) and the reason is
+    returned, an ``evo.run.files.WriteFailed`` (or a ``RecordError``), for the caller
+    to raise: the run stops.
     """
     if (full := full_disk(path)) is not None:
-        _let_the_writer_fail(rec)
+        _abandon(rec)
         return full
     try:
         rec.flush(timeout_sec=FLUSH_S)
     except RuntimeError as err:  # timed out: rerun's writer is stuck
+        _abandon(rec)
         return full_disk(path) or RecordError(f"{path}: {err}")
     rec.disconnect()
     return None if _has_footer(path) else full_disk(path)
 
 
-WRITER_THREAD = "file_writer"
-"""The name of the thread that writes an ``.rrd`` file (one per open file)."""
+def _abandon(rec: rr.RecordingStream) -> None:
+    """Leave ``rec`` alone to the end of the process.
 
-
-def _writer_threads() -> int:
-    """How many of this process's threads write ``.rrd`` files (0 where unknown)."""
-    try:
-        tasks = list(Path("/proc/self/task").iterdir())
-    except OSError:
-        return 0
-    count = 0
-    for task in tasks:
-        with contextlib.suppress(OSError):  # a thread that ended meanwhile
-            count += (task / "comm").read_text().strip() == WRITER_THREAD
-    return count
-
-
-def _let_the_writer_fail(rec: rr.RecordingStream, wait_s: float = 2.0) -> None:
-    """On a full disk rerun's writer thread ends at its next write; a flush (a dropped
-    stream flushes too) that reaches it before it ends then waits forever (rerun
-    0.41). So hand it what is left without waiting, and wait, ``wait_s`` at most, for
-    a writer thread to end, before the caller drops the stream."""
-    before = _writer_threads()
-    rec.flush(timeout_sec=0.0)
-    deadline = time.monotonic() + wait_s
-    while _writer_threads() >= before and time.monotonic() < deadline:
-        time.sleep(0.01)
+    A stream whose writer failed can be neither flushed, disconnected nor dropped (a
+    dropped stream is flushed): each waits forever when it reaches the writer thread as
+    it fails (rerun 0.41). Nor can :func:`release_streams` or rerun's own shutdown at
+    exit run after it, as both flush every stream. The process is stopping (a failed
+    write ends the run), so the stream is kept alive past the interpreter's end, and
+    the process ends without either.
+    """
+    _abandoned.append(rec)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(rec))  # not freed even at exit
+    rr.unregister_shutdown()
 
 
 def _has_footer(path: Path) -> bool:
@@ -193,7 +180,8 @@ def release_streams() -> None:
     does one); without it every evaluation would leave idle threads behind in a
     long-lived worker process.
     """
-    rerun_bindings.flush_and_cleanup_orphaned_recordings()
+    if not _abandoned:  # the sweep flushes every stream, an abandoned one too
+        rerun_bindings.flush_and_cleanup_orphaned_recordings()
 
 
 def _save(rec: rr.RecordingStream, path: Path, blueprint: rrb.Blueprint) -> None:
