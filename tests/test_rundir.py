@@ -460,7 +460,7 @@ def test_a_full_disk_at_each_kind_of_write_stops_the_run_and_resume_completes_it
     for i, (kind, after, named) in enumerate(SESSIONS):
         args = [*TINY, "executor=serial", f"hydra.run.dir={run_dir}"] if i == 0 else [
             f"resume={run_dir}"]
-        done = run(full_disk_cmd(kind, after, *args), tmp_path)
+        done = run(full_disk_cmd(kind, after, *args), tmp_path, timeout=120)
         lines = evo_lines(done.stderr)
         matrix.append((kind, done.returncode, lines[-1] if lines else ""))
         assert done.returncode == 1, (kind, done.returncode, done.stderr[-3000:])

@@ -122,7 +122,7 @@ def eval_blueprint() -> rrb.Blueprint:
 FOOTER_END = b"RRF2FOOT"
 """What a complete ``.rrd`` ends with, but for its last 4 bytes (the footer's version)."""
 
-FLUSH_S = 10.0
+FLUSH_S = 60.0
 """Longest wait for rerun to write what was logged, seconds."""
 
 _abandoned: list[rr.RecordingStream] = []  # streams whose writer failed (:func:`_abandon`)
