@@ -1,8 +1,12 @@
 """One evaluation of one robot: train its behaviour, keep its files, report its fitness.
 
 ``evaluate`` runs in a worker process (or a Ray task), so its inputs and outputs are
-plain picklable values. It never raises: a failure comes back as an ``Outcome`` with the
-error, and the evolution loop records it and goes on. The learner is the one the job's
+plain picklable values. A failure of the evaluation comes back as an ``Outcome`` with
+its error in one line (an unexpected exception's traceback goes to
+``evals/<name>.log``), and the evolution loop records it and goes on. A write that
+fails for want of room is not the robot's failure: it raises
+``evo.run.files.WriteFailed``, the run stops, and the robot, still in flight, is
+evaluated again on resume. The learner is the one the job's
 learner config names (``evo.learners.get_learner``) unless the caller passes another.
 """
 
@@ -31,6 +35,7 @@ from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_re
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import parse_robot
 from evo.robot.tree import Robot
+from evo.run.files import WriteFailed, write_csv, write_failure, write_text
 from evo.run.layout import RunLayout
 
 
@@ -116,9 +121,43 @@ def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExec
         return future.result()
     except EvaluationLost as err:
         executor.restart()
-        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {err}")
+        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {one_line(err)}")
+    except WriteFailed:
+        raise  # the disk's fault: the run stops and resumes with the robot in flight
     except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
-        return Outcome(candidate.birth, candidate.name, error=f"{type(err).__name__}: {err}")
+        cause = getattr(err, "cause", None)  # Ray wraps a task's error (RayTaskError)
+        if isinstance(cause, WriteFailed):
+            raise WriteFailed(cause.errno, cause.strerror, cause.filename) from err
+        return Outcome(candidate.birth, candidate.name, error=first_line(err))
+
+
+EXPECTED = (EvaluationTimeout,)
+"""Failures that are outcomes of an evaluation, not faults of the code: one line each."""
+
+
+def one_line(err: BaseException) -> str:
+    """The message of ``err`` up to its first line break."""
+    lines = str(err).strip().splitlines()
+    return lines[0] if lines else ""
+
+
+def first_line(err: BaseException) -> str:
+    """``Type: message`` of ``err``, its message cut at the first line break."""
+    message = one_line(err)
+    return f"{type(err).__name__}: {message}" if message else type(err).__name__
+
+
+def error_cell(err: BaseException, candidate: Candidate, job: Job) -> str:
+    """``history.csv``'s one-line ``error`` of an evaluation that ``err`` ended: an
+    expected outcome's message, or an unexpected exception's first line and the file
+    (``evals/<name>.log``) that holds its traceback. Call it while ``err`` is handled."""
+    if isinstance(err, EXPECTED):
+        return first_line(err)
+    layout = RunLayout(Path(job.run_dir))
+    log = layout.error_log(candidate.name)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    write_text(log, traceback.format_exc())
+    return f"{first_line(err)} (traceback in {layout.relative(log)})"
 
 
 class EpisodeSampler:
@@ -170,8 +209,12 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
     except Exception as err:  # noqa: BLE001 - any failure is recorded and the run goes on
         if (stop := raised()) is not None:  # a signal, turned into another error on its way
             raise stop from err
+        if (full := write_failure(err)) is not None:  # the disk's fault, not the robot's:
+            # the run stops, the robot stays in flight (evo.run.files). A new exception:
+            # raising ``full`` again would reorder its chain, where the first is the deepest.
+            raise WriteFailed(full.errno, full.strerror, full.filename) from err
         return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
-                       error=traceback.format_exc(limit=8))
+                       error=error_cell(err, candidate, job))
     finally:
         # The evaluation's reference cycles (recording streams among them) hold native
         # memory that a long-lived worker would otherwise keep until a rare full collection.
@@ -232,7 +275,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
                                seed=candidate.seed)
             recorder.episode(dataclasses.replace(final, index=sampler.count,
                                                  env_step=result.env_steps))
-        result.curve.to_csv(layout.curve(candidate.name), index=False)
+        write_csv(layout.curve(candidate.name), result.curve)
         save_checkpoint(result.policy, layout.policy(candidate.name), job.learner,
                         robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")

@@ -17,6 +17,7 @@ Tasks (``task=``):
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from collections.abc import Callable
@@ -51,7 +52,14 @@ from evo.robot import (
     load_robot,
     random_robots,
 )
-from evo.run.files import RunDirectoryBusy, RunLock, busy_message, is_locked
+from evo.run.files import (
+    RunDirectoryBusy,
+    RunLock,
+    busy_message,
+    is_locked,
+    write_failure,
+    write_text,
+)
 from evo.run.layout import RunLayout
 from evo.run.records import HistoryRow
 from evo.run.store import RunStore, SavedState
@@ -268,7 +276,7 @@ def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> No
         )
     if lock is not None:
         lock.claim()
-    path.write_text(text)
+    write_text(path, text)
 
 
 def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, float]:
@@ -293,10 +301,15 @@ def main(cfg: DictConfig) -> object:
     A bad config value, or a directory another process holds, ends the run with one
     clear line (exit 2). SIGINT or SIGTERM stop it cleanly (``evo.interrupt``): the
     evaluations in flight are stopped, the state and recordings are kept, and one line
-    says how to continue (exit 130 or 143).
+    says how to continue (exit 130 or 143). A write that fails for want of room (a full
+    disk or quota, a file-size limit) ends it with one line naming the file and the
+    cause (exit 1); it resumes once there is room (``evo.run.files``).
     """
     out = Path(HydraConfig.get().runtime.output_dir)
     lock = RunLock(out)
+    # A log file that can no longer be written (a full disk) must not print a traceback
+    # per message and bury the one line that says why the run stopped.
+    logging.raiseExceptions = False
     try:
         with handle_signals(), lock:
             task = TASKS.get(str(cfg.task))
@@ -317,13 +330,26 @@ def main(cfg: DictConfig) -> object:
     except RunDirectoryBusy as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
+    except Exception as err:
+        # A full disk (or quota, or file-size limit): the state on disk is the last one
+        # written whole. The first file that failed is named (closing the others on the
+        # way out fails too), in one line.
+        if (full := write_failure(err)) is None:
+            raise
+        print(f"error: {full}; {_how_to_continue(cfg, out, 'make room, then ')}",
+              file=sys.stderr)
+        sys.exit(1)
     except (Interrupted, KeyboardInterrupt) as stop:
         code = stop.exit_code if isinstance(stop, Interrupted) else 130
-        if str(cfg.task) == "evolve":
-            print(f"interrupted; continue with: python evo/main.py resume={out}", file=sys.stderr)
-        else:
-            print(f"interrupted; {out} is incomplete", file=sys.stderr)
+        print(f"interrupted; {_how_to_continue(cfg, out)}", file=sys.stderr)
         sys.exit(code)
+
+
+def _how_to_continue(cfg: DictConfig, out: Path, first: str = "") -> str:
+    """How a stopped run goes on: its resume command, or that its directory is incomplete."""
+    if str(cfg.task) == "evolve":
+        return f"{first}continue with: python evo/main.py resume={out}"
+    return f"{out} is incomplete"
 
 
 def _check_run_dir_arg(argv: list[str]) -> None:

@@ -245,16 +245,24 @@ def test_a_failing_evaluation_is_recorded_and_the_run_goes_on(tmp_path: Path) ->
     check_steady_state(tmp_path, 4, 12, seed=3)
 
 
-def test_an_error_inside_training_is_recorded_with_its_traceback(tmp_path: Path) -> None:
-    def broken_learner(*args: Any, **kwargs: Any) -> Any:
-        raise FloatingPointError("policy diverged")
+def broken_learner(*args: Any, **kwargs: Any) -> Any:
+    raise FloatingPointError("policy diverged\nin batch 3")
 
+
+def test_an_error_inside_training_is_one_line_and_its_traceback_a_file(tmp_path: Path) -> None:
     summary = make_evolution(tmp_path, population=2, budget=3,
                              evaluate=functools.partial(evaluate, learner=broken_learner)).run()
     history = read_history(tmp_path)
     assert len(history) == 3 and history["fitness"].isna().all()
-    assert history["error"].str.contains("FloatingPointError: policy diverged").all()
     assert summary.failed == 3 and summary.best_robot is None and summary.complete
+    assert len((tmp_path / "history.csv").read_text().splitlines()) == 1 + 3, "one line a row"
+    for name, error in zip(history["name"], history["error"], strict=True):
+        log = f"evals/{name}.log"
+        assert error == f"FloatingPointError: policy diverged (traceback in {log})", error
+        traceback = (tmp_path / log).read_text()
+        assert traceback.startswith("Traceback (most recent call last):"), traceback
+        assert "in broken_learner" in traceback
+        assert traceback.rstrip().endswith("FloatingPointError: policy diverged\nin batch 3")
 
 
 # A worker that dies: tests/test_lost_work.py.

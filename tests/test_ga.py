@@ -423,8 +423,10 @@ def test_an_evaluation_past_its_time_limit_is_an_error_outcome(tmp_path: Path) -
     (candidate,) = tiny_candidates()
     job = dataclasses.replace(tiny_job(tmp_path), timeout_s=1e-6)
     outcome = evaluate(dataclasses.replace(candidate, budget=10 * 128), job)
-    assert outcome.error and "EvaluationTimeout" in outcome.error, outcome.error
+    assert outcome.error and outcome.error.startswith("EvaluationTimeout: "), outcome.error
     assert "timed out after" in outcome.error and "ga.eval_timeout_s" in outcome.error
+    assert "\n" not in outcome.error, "an expected outcome is one line, with no traceback"
+    assert not (tmp_path / "evals" / f"{candidate.name}.log").exists()
     assert math.isnan(outcome.fitness)
     # Stopped after its first batch, and the recording of that batch was kept.
     curve = read_curve(tmp_path / "evals" / f"{candidate.name}.mcap")
@@ -433,7 +435,8 @@ def test_an_evaluation_past_its_time_limit_is_an_error_outcome(tmp_path: Path) -
 
 def test_an_unsimulatable_robot_is_an_error_outcome(tmp_path: Path) -> None:
     outcome = evaluate(BROKEN, tiny_job(tmp_path))
-    assert outcome.error and "broken" in outcome.error
+    assert outcome.error and "broken" in outcome.error and "\n" not in outcome.error
+    assert outcome.error.endswith("(traceback in evals/broken.log)"), outcome.error
     assert math.isnan(outcome.fitness) and outcome.env_steps == 0
     assert not (tmp_path / "evals" / "broken.pt").exists()
 

@@ -8,7 +8,10 @@ End to end through ``python evo/main.py`` in subprocesses with real (tiny) train
   SIGKILLed holder does not block the next resume;
 * SIGTERM and SIGINT stop a run with one line and exit 143 or 130, leave no worker
   process alive, and the resumed run is the uninterrupted one (serial);
-* SIGKILL of the main process alone takes its workers with it.
+* SIGKILL of the main process alone takes its workers with it;
+* a full disk at each kind of write (state, history, robot file, policy, MCAP and rerun
+  recordings) stops the run with one line and exit 1, and the resumed run is the
+  uninterrupted one.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import pytest
 from omegaconf import OmegaConf
 from test_evolution import (
     ENV,
+    REPO,
     TINY,
     check_run_dir,
     comparable,
@@ -415,3 +419,73 @@ def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
     assert verdict.landed == 1, verdict
     assert verdict.lost == 0 and verdict.twice == 0, verdict
     assert verdict.identical and not verdict.unreadable, verdict
+
+
+# ---- a full disk ---------------------------------------------------------------------------
+# tests/full_disk.py runs evo/main.py and lowers the process's real file-size limit
+# (RLIMIT_FSIZE) just before one write of the kind under test, which then fails in the
+# kernel (EFBIG) as on a full disk. One run directory goes through a session per kind,
+# each a resume of the one before: each records its rows, then meets the full disk; the
+# last resume, with room again, must give the uninterrupted run's history.
+
+SESSIONS = [  # kind of write, rows this session records first, the file it names
+    ("robot", 1, "robots/"),
+    ("policy", 1, ".pt"),
+    ("mcap", 1, ".mcap"),
+    ("rrd", 1, ".rrd"),
+    ("state", 1, "state.json"),
+    ("history", 0, "history.csv"),
+]
+IN_EVALUATION = {"policy", "mcap", "rrd"}
+"""Kinds written by the evaluation: the robot stays in flight, evaluated again on resume."""
+
+KEY = ["birth", "name", "fitness", "accepted"]
+
+SDK_LOG = ("re_log_encoding::", "re_sdk::")
+"""rerun's own log lines on stderr (its writer thread reports the failed write there)."""
+
+
+def full_disk_cmd(kind: str, after: int, *args: str) -> list[str]:
+    return [sys.executable, str(REPO / "tests" / "full_disk.py"), kind, str(after),
+            str(REPO / "evo" / "main.py"), *args]
+
+
+def evo_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines()
+            if line.strip() and not any(tag in line for tag in SDK_LOG)]
+
+
+@pytest.mark.slow
+def test_a_full_disk_at_each_kind_of_write_stops_the_run_and_resume_completes_it(
+    tmp_path: Path, serial_reference: Path
+) -> None:
+    run_dir = tmp_path / "run"
+    reference = comparable(read_history(serial_reference))
+    matrix, rows = [], 0
+    for i, (kind, after, named) in enumerate(SESSIONS):
+        args = [*TINY, "executor=serial", f"hydra.run.dir={run_dir}"] if i == 0 else [
+            f"resume={run_dir}"]
+        done = run(full_disk_cmd(kind, after, *args), tmp_path, timeout=120)
+        lines = evo_lines(done.stderr)
+        matrix.append((kind, done.returncode, lines[-1] if lines else ""))
+        assert done.returncode == 1, (kind, done.returncode, done.stderr[-3000:])
+        assert "Traceback" not in done.stderr, done.stderr[-3000:]
+        assert len(lines) == 1, (kind, lines)
+        (line,) = lines
+        assert line.startswith(f"error: cannot write {run_dir}/") and named in line, line
+        assert "File too large (EFBIG)" in line and line.endswith(f"resume={run_dir}"), line
+        # The state on disk is whole and consistent, and holds this session's new rows.
+        saved = RunStore(run_dir).load()
+        rows += after
+        assert len(saved.history) == rows, (kind, len(saved.history))
+        kept = [(r.birth, r.name, r.fitness, r.accepted) for r in saved.history]
+        assert kept == list(reference[KEY].itertuples(index=False, name=None))[:rows], kind
+        pending = [t.birth for t in saved.pending]
+        assert pending == ([rows] if kind in IN_EVALUATION else []), (kind, pending)
+    done = run(main_cmd(f"resume={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = check_run_dir(run_dir, robot_budget=6)
+    identical = comparable(history).equals(reference)
+    print("\nkind     exit  message\n" + "\n".join(f"{k:8} {c:4}  {m}" for k, c, m in matrix)
+          + f"\nresumed with room: exit {done.returncode}, history identical: {identical}")
+    pd.testing.assert_frame_equal(comparable(history), reference)

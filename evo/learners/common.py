@@ -9,6 +9,7 @@ reproduces the policy (no environment transform to restore).
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from torchrl.modules import MLP, IndependentNormal, ProbabilisticActor, ValueOpe
 from evo.checks import at_least, within
 from evo.envs.params import ACTUATOR_SLOTS, action_size, observation_origins
 from evo.robot.tree import Robot
+from evo.run.files import write_bytes
 
 
 @dataclass(frozen=True, slots=True)
@@ -400,10 +402,9 @@ def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig, *,
     state["hidden"] = list(config.hidden)
     state["normalize_obs"] = config.normalize_obs
     state["robot"] = robot
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    torch.save(state, tmp)
-    tmp.replace(path)
-    return path
+    data = io.BytesIO()  # torch reports a failed write without its cause: written here
+    torch.save(state, data)
+    return write_bytes(path, data.getvalue())
 
 
 def load_checkpoint(path: Path, *, robot: Robot | None = None,

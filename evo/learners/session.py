@@ -25,7 +25,7 @@ from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
-from evo.run.files import write_json
+from evo.run.files import write_csv, write_json
 from evo.run.layout import TrainLayout
 from evo.run.records import TrainSummary, write_train_summary
 
@@ -75,7 +75,7 @@ def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
             seed=seed,
             on_curve=show,
         )
-    result.curve.to_csv(layout.curve, index=False)
+    write_csv(layout.curve, result.curve)
     save_checkpoint(result.policy, layout.policy, learner, robot=robot.hash)
     summary = _train_summary(robot, result, physics=physics, env=env, learner=learner,
                              seed=seed)

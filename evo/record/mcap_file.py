@@ -35,7 +35,8 @@ file whose messages up to the last flush ``evo.record.readback`` recovers.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Unpack
 
@@ -64,6 +65,7 @@ from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
 from evo.record.rows import encode_metadata, encode_row, json_number, object_schema, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder
+from evo.run.files import full_disk
 
 TOPIC_SCENE = "/scene"
 TOPIC_TF = "/tf"
@@ -175,7 +177,19 @@ class McapFile:
             )
         except Exception as err:
             raise RecordError(f"{self.path}: cannot create the MCAP file: {err}") from err
-        self.writer.write_metadata(METADATA, encode_metadata(metadata))
+        with self._writing():
+            self.writer.write_metadata(METADATA, encode_metadata(metadata))
+
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """A failed write of the writer's (which names no cause: the cause goes to its own
+        log) is ``evo.run.files.WriteFailed`` when the disk is why."""
+        try:
+            yield
+        except Exception as err:
+            if (full := full_disk(self.path)) is not None:
+                raise full from err
+            raise
 
     def channel(self, topic: str, schema: foxglove.Schema | dict[str, Any],
                 message_encoding: str) -> foxglove.Channel:
@@ -192,15 +206,20 @@ class McapFile:
 
     def flush(self) -> None:
         """Close the open chunk and write it to disk."""
-        self.writer.flush()
+        with self._writing():
+            self.writer.flush()
 
     def close(self, summary: Mapping[str, Any]) -> None:
         """Write ``summary`` as the ``evo.summary`` record and finish the file."""
         try:
-            self.writer.write_metadata(SUMMARY, encode_metadata(summary))
+            with self._writing():
+                self.writer.write_metadata(SUMMARY, encode_metadata(summary))
         finally:
-            self.writer.close()
-            self._release_channels()
+            try:
+                with self._writing():
+                    self.writer.close()
+            finally:
+                self._release_channels()
 
     def _release_channels(self) -> None:
         """Close this file's channels and drop them from foxglove's registry.

@@ -20,6 +20,7 @@ The default blueprint shows the 3D scene next to tabs of curve plots.
 
 from __future__ import annotations
 
+import ctypes
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -37,6 +38,7 @@ from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, ELLIPSOID, Geometry, scene_geometry
 from evo.record.mcap_file import EPISODE_GAP_NS, RecordError
 from evo.record.rows import plain
+from evo.run.files import full_disk
 
 APPLICATION = "evo"
 REPLAY = "replay"
@@ -117,12 +119,58 @@ def eval_blueprint() -> rrb.Blueprint:
     )
 
 
-def finish_rrd(rec: rr.RecordingStream) -> None:
-    """Write everything logged to ``rec``'s file and close it (with its footer)."""
+FOOTER_END = b"RRF2FOOT"
+"""What a complete ``.rrd`` ends with, but for its last 4 bytes (the footer's version)."""
+
+FLUSH_S = 60.0
+"""Longest wait for rerun to write what was logged, seconds."""
+
+_abandoned: list[rr.RecordingStream] = []  # streams whose writer failed (:func:`_abandon`)
+
+
+def finish_rrd(rec: rr.RecordingStream, path: Path) -> Exception | None:
+    """Write everything logged to ``rec``'s file ``path`` and close it (with its footer).
+
+    rerun writes the file on a thread of its own, which a failed write ends, reported
+    only in rerun's log. On a full disk (or a file-size limit reached), or when the
+    flush does not end, the stream is abandoned (:func:`_abandon`) and the reason is
+    returned, an ``evo.run.files.WriteFailed`` (or a ``RecordError``), for the caller
+    to raise: the run stops.
+    """
+    if (full := full_disk(path)) is not None:
+        _abandon(rec)
+        return full
     try:
-        rec.flush()
-    finally:
-        rec.disconnect()
+        rec.flush(timeout_sec=FLUSH_S)
+    except RuntimeError as err:  # timed out: rerun's writer is stuck
+        _abandon(rec)
+        return full_disk(path) or RecordError(f"{path}: {err}")
+    rec.disconnect()
+    return None if _has_footer(path) else full_disk(path)
+
+
+def _abandon(rec: rr.RecordingStream) -> None:
+    """Leave ``rec`` alone to the end of the process.
+
+    A stream whose writer failed can be neither flushed, disconnected nor dropped (a
+    dropped stream is flushed): each waits forever when it reaches the writer thread as
+    it fails (rerun 0.41). Nor can :func:`release_streams` or rerun's own shutdown at
+    exit run after it, as both flush every stream. The process is stopping (a failed
+    write ends the run), so the stream is kept alive past the interpreter's end, and
+    the process ends without either.
+    """
+    _abandoned.append(rec)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(rec))  # not freed even at exit
+    rr.unregister_shutdown()
+
+
+def _has_footer(path: Path) -> bool:
+    try:
+        with path.open("rb") as file:
+            file.seek(-(len(FOOTER_END) + 4), 2)
+            return file.read(len(FOOTER_END)) == FOOTER_END
+    except OSError:
+        return False
 
 
 def release_streams() -> None:
@@ -132,7 +180,8 @@ def release_streams() -> None:
     does one); without it every evaluation would leave idle threads behind in a
     long-lived worker process.
     """
-    rerun_bindings.flush_and_cleanup_orphaned_recordings()
+    if not _abandoned:  # the sweep flushes every stream, an abandoned one too
+        rerun_bindings.flush_and_cleanup_orphaned_recordings()
 
 
 def _save(rec: rr.RecordingStream, path: Path, blueprint: rrb.Blueprint) -> None:
@@ -291,7 +340,8 @@ class RerunRecorder(RecorderBase):
             self._send_curve()
             log_text(self.rec, "summary", summary)
         finally:
-            if self._rec is not None:
-                finish_rrd(self._rec)
+            failed = finish_rrd(self._rec, self.path) if self._rec is not None else None
             self._rec = None  # the last reference: rerun may now free the stream
             release_streams()
+            if failed is not None:
+                raise failed

@@ -224,9 +224,11 @@ class RunRecorder(RecorderBase):
                 self.mcap.close(summary)
         finally:
             if self.rec is not None:
-                finish_rrd(self.rec)
-                self.rec = None
+                failed = finish_rrd(self.rec, RunLayout(self.directory).run_rrd)
+                self.rec = None  # the last reference: rerun may now free the stream
                 release_streams()
+                if failed is not None:
+                    raise failed
 
 
 def _style_series(rec: rr.RecordingStream) -> None:

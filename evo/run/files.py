@@ -4,6 +4,13 @@ Every file a run rewrites goes through :func:`write_json` or :func:`write_csv`: 
 to ``<name>.tmp`` and renamed over the old one, so a crash leaves the old file or the
 new one, never half of either.
 
+**A write that fails** (a full disk, a quota, a file-size limit) raises
+:class:`WriteFailed`, an ``OSError`` that names the file and the cause. It is never a
+robot's fault: the run stops with that one line (exit 1) and resumes once there is
+room again (the state on disk is the last one written whole). The recording SDKs write
+from native code and report a failed write only in their own log, so their writers ask
+:func:`full_disk` why a file came out short.
+
 **The lock.** A run (or a resume, or a one-robot training) owns its directory for its
 whole life through an exclusive ``flock`` on the directory itself, taken with
 :meth:`RunLock.acquire` before anything is read or written. The kernel releases it
@@ -16,11 +23,15 @@ analysis tools never take the lock; :func:`is_locked` only asks whether a run is
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import os
+import resource
 import socket
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -28,21 +39,92 @@ import pandas as pd
 
 from evo.run.layout import RunLayout
 
+DISK_FULL = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
+"""The ``errno`` of a full disk, a file-size limit (``RLIMIT_FSIZE``) and a full quota."""
+
+FULL_BELOW = 1 << 20
+"""A file system with less room than this (bytes) counts as full (:func:`full_disk`)."""
+
+
+class WriteFailed(OSError):
+    """A file of the run could not be written; ``filename`` names it, ``strerror`` and
+    ``errno`` say why. Picklable, so it crosses from a pool worker to the run."""
+
+    def __str__(self) -> str:
+        code = errno.errorcode.get(self.errno or 0)
+        return f"cannot write {self.filename}: {self.strerror}" + (f" ({code})" if code else "")
+
+
+@contextmanager
+def writing(path: Path) -> Iterator[Path]:
+    """Turn an ``OSError`` raised inside the block into :class:`WriteFailed` naming ``path``."""
+    try:
+        yield path
+    except WriteFailed:
+        raise
+    except OSError as err:
+        raise WriteFailed(err.errno, err.strerror or str(err), str(path)) from err
+
+
+def write_failure(err: BaseException) -> WriteFailed | None:
+    """The first write failure behind ``err``: ``err`` itself or an exception it was
+    raised while handling (closing files on the way out fails too on a full disk). An
+    ``OSError`` of a full disk raised where no run file was named counts, unnamed."""
+    chain: list[BaseException] = []
+    seen: BaseException | None = err
+    while seen is not None and seen not in chain:
+        chain.append(seen)
+        seen = seen.__context__
+    named = [e for e in chain if isinstance(e, WriteFailed)]
+    if named:
+        return named[-1]
+    full = [e for e in chain if isinstance(e, OSError) and e.errno in DISK_FULL]
+    first = full[-1] if full else None
+    if isinstance(first, OSError):
+        return WriteFailed(first.errno, first.strerror, str(first.filename or "a file"))
+    return None
+
+
+def full_disk(path: Path) -> WriteFailed | None:
+    """Why ``path`` could not grow, when the reason is the disk's: the process's
+    file-size limit is reached (``EFBIG``) or its file system has no room (``ENOSPC``);
+    None when neither holds (a quota cannot be told from here)."""
+    try:
+        size = path.stat().st_size
+        room = os.statvfs(path.parent)
+    except OSError:
+        return None
+    limit, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if limit != resource.RLIM_INFINITY and size >= limit:
+        return WriteFailed(errno.EFBIG, os.strerror(errno.EFBIG), str(path))
+    free = room.f_bfree if os.geteuid() == 0 else room.f_bavail
+    if free * room.f_frsize < FULL_BELOW:
+        return WriteFailed(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    return None
+
+
+def write_bytes(path: Path, data: bytes) -> Path:
+    """Write ``data`` atomically (a crash leaves the old file or the new one)."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with writing(path):
+        tmp.write_bytes(data)
+        tmp.replace(path)
+    return path
+
+
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` atomically."""
+    return write_bytes(path, text.encode())
+
 
 def write_json(path: Path, data: dict[str, Any]) -> Path:
     """Write ``data`` as JSON atomically (a crash leaves the old file or the new one)."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    tmp.replace(path)
-    return path
+    return write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
 
 
 def write_csv(path: Path, table: pd.DataFrame) -> Path:
     """Write ``table`` as CSV (no index) atomically."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    table.to_csv(tmp, index=False)
-    tmp.replace(path)
-    return path
+    return write_text(path, table.to_csv(index=False))
 
 
 class RunDirectoryBusy(RuntimeError):

@@ -13,6 +13,7 @@ An evolution run directory (``task=evolve``)::
     evals/<name>.pt        its trained policy
     evals/<name>.csv       its learning curve
     evals/<name>.mcap/.rrd its recordings
+    evals/<name>.log       the traceback of its evaluation, when an exception ended it
 
 A one-robot training (``+exp=train``) writes ``robot.json``, ``policy.pt``, ``curve.csv``
 and ``summary.json`` (``evo.run.records.TrainSummary``) instead. Code outside
@@ -40,6 +41,7 @@ POLICY_SUFFIX = ".pt"
 CURVE_SUFFIX = ".csv"
 MCAP_SUFFIX = ".mcap"
 RRD_SUFFIX = ".rrd"
+ERROR_LOG_SUFFIX = ".log"
 TRAIN_ROBOT = "robot.json"
 TRAIN_POLICY = "policy.pt"
 TRAIN_CURVE = "curve.csv"
@@ -120,6 +122,14 @@ class RunLayout:
     def rrd(self, name: str) -> Path:
         """``evals/<name>.rrd``: the evaluation's rerun recording."""
         return self.evals / f"{name}{RRD_SUFFIX}"
+
+    def error_log(self, name: str) -> Path:
+        """``evals/<name>.log``: the traceback of an evaluation that an exception ended."""
+        return self.evals / f"{name}{ERROR_LOG_SUFFIX}"
+
+    def relative(self, path: Path) -> str:
+        """``path`` as named inside the run directory (``evals/<name>.log``)."""
+        return str(path.relative_to(self.root))
 
     def robot_names(self) -> list[str]:
         """The names of the robots in ``robots/``, sorted."""

@@ -75,8 +75,9 @@ class RunStore:
 
     # ---- robots ---------------------------------------------------------------------------
     def save_robot(self, name: str, robot: Robot) -> Path:
-        """Write ``robots/<name>.json``."""
-        return save_robot(robot, self.layout.robot(name))
+        """Write ``robots/<name>.json`` (atomically; a failure is ``files.WriteFailed``)."""
+        with files.writing(self.layout.robot(name)) as path:
+            return save_robot(robot, path)
 
     def load_robot(self, name: str) -> Robot:
         """Read ``robots/<name>.json``.
