@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -29,7 +29,10 @@ from numpy.typing import ArrayLike, NDArray
 from analysis.tables import is_evolved, require_columns
 
 Statistic = Callable[..., Any]
-"""``f(*samples, axis=-1)``: reduces each sample along ``axis`` (vectorised) to a value."""
+"""``f(*samples, axis=-1)``: reduces each sample along ``axis`` (vectorised) to a value.
+
+The value is what a scipy or numpy reduction returns (a float for 1-D samples, an array
+for more dimensions); scipy carries no types, so it is Any here, at that seam."""
 
 
 def resampling_units(rows: pd.DataFrame) -> NDArray[np.int64] | None:
@@ -86,6 +89,15 @@ class Resampling:
         return cls(np.random.default_rng(seed), n_resamples=n_resamples)
 
 
+class _Options(TypedDict):
+    """The keyword arguments of :func:`scipy.stats.bootstrap` that a Resampling sets."""
+
+    n_resamples: int
+    confidence_level: float
+    method: str
+    rng: np.random.Generator
+
+
 def bootstrap_ci(
     samples: Sequence[ArrayLike],
     statistic: Statistic,
@@ -116,7 +128,7 @@ def bootstrap_ci(
         raise ValueError(f"got {len(arrays)} samples but {len(labels)} unit labellings")
     if any(_n_units(a, u) < 2 for a, u in zip(arrays, labels, strict=False)):
         return (np.nan, np.nan)
-    options: dict[str, Any] = dict(
+    options = _Options(
         n_resamples=resampling.n_resamples, confidence_level=resampling.confidence,
         method=resampling.method, rng=resampling.rng,
     )

@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
 from analysis import plots, stats
 from analysis.load import Runs, load_runs
@@ -146,7 +147,7 @@ def parting_table(without: Runs, with_: Runs) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _mean_ci(x: np.ndarray) -> tuple[float, float, float]:
+def _mean_ci(x: NDArray[np.float64]) -> tuple[float, float, float]:
     """Mean and t-based 95 % CI (NaN interval below two values)."""
     if len(x) < 2 or np.ptp(x) == 0:
         mean = float(np.mean(x)) if len(x) else np.nan
@@ -155,7 +156,8 @@ def _mean_ci(x: np.ndarray) -> tuple[float, float, float]:
     return float(np.mean(x)), float(ci.low), float(ci.high)
 
 
-def _paired(with_: np.ndarray, without: np.ndarray) -> tuple[float, float, float, float]:
+def _paired(with_: NDArray[np.float64], without: NDArray[np.float64]
+            ) -> tuple[float, float, float, float]:
     """Mean of the paired differences with its t CI, and the paired t-test's p."""
     mean, low, high = _mean_ci(with_ - without)
     if np.isnan(low):

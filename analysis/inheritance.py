@@ -50,6 +50,7 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
 from analysis import plots
 from analysis.bootstrap import Resampling, bootstrap_ci
@@ -300,7 +301,7 @@ def equal_cost_table(trace: pd.DataFrame) -> tuple[pd.DataFrame, int]:
 # ---------------------------------------------------------------- statistics
 
 
-def t_interval(differences: Sequence[float] | np.ndarray, confidence: float = CONFIDENCE
+def t_interval(differences: Sequence[float] | NDArray[np.float64], confidence: float = CONFIDENCE
                ) -> tuple[float, float, float, float]:
     """Mean of paired differences, its t interval (``scipy.stats.t``) and the one-sample
     t-test's p against 0; NaN interval and p below two values, a point when all agree."""

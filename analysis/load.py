@@ -43,7 +43,7 @@ import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -74,6 +74,23 @@ STRUCTURE = re.compile(r"^(robot-[0-9a-f]{8})")
 """A robot name's structure part: re-evaluations of one structure add ``-<birth>``."""
 
 PathsLike = str | os.PathLike[str] | Iterable[str | os.PathLike[str]]
+
+
+class RunStatus(TypedDict):
+    """Whether a run has finished (the ``complete`` and ``status`` columns of ``runs``)."""
+
+    complete: bool
+    status: Literal["running", "complete", "partial"]
+
+
+class RetrainedRow(TypedDict):
+    """One training of a structure trained again (a row of :func:`load_retrained`)."""
+
+    structure: str
+    train_seed: float  # the replicate or the training's seed; NaN when unknown
+    fitness: float
+    budget: float  # env steps; NaN when the training's summary lacks them
+    source: str  # the directory it came from
 
 
 class RunDirectoryError(ValueError):
@@ -430,15 +447,15 @@ def _whole_rows(history: pd.DataFrame, path: Path) -> tuple[pd.DataFrame, int]:
     return history[~cut].reset_index(drop=True), int(cut.sum())
 
 
-def _status(run_dir: Path, broken: int) -> dict[str, Any]:
+def _status(run_dir: Path, broken: int) -> RunStatus:
     """``complete`` and ``status`` of a run (see :class:`Runs`)."""
     from evo.run.files import is_locked
 
     if is_locked(run_dir):
-        return dict(complete=False, status="running")
+        return RunStatus(complete=False, status="running")
     summary = _summary(run_dir)
     complete = summary is not None and bool(summary.complete) and not broken
-    return dict(complete=complete, status="complete" if complete else "partial")
+    return RunStatus(complete=complete, status="complete" if complete else "partial")
 
 
 def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:
@@ -465,10 +482,10 @@ def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
 # ---------------------------------------------------------------- retrained structures
 
 
-def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
+def _retrained_in(path: Path) -> tuple[list[RetrainedRow], bool]:
     """The :func:`load_retrained` rows of everything under ``path``, and whether it
     holds any noise-ceiling folder, evolution run or training run."""
-    rows: list[dict[str, Any]] = []
+    rows: list[RetrainedRow] = []
     tables = sorted({p for p in (path / "trainings.csv", *path.rglob("trainings.csv"))
                      if p.is_file()})
     found = bool(tables)
@@ -477,18 +494,18 @@ def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
         for row in trainings[trainings["role"] == "seed"].itertuples(index=False):
             # The replicate, not the derived seed: replicate k of every structure is one
             # column of the seed-to-seed comparison, as the tool itself pivots it.
-            rows.append(dict(structure=str(row.structure), train_seed=row.replicate,
-                             fitness=float(row.fitness), budget=row.env_steps,
-                             source=str(table_path.parent)))
+            rows.append(RetrainedRow(structure=str(row.structure), train_seed=row.replicate,
+                                     fitness=float(row.fitness), budget=row.env_steps,
+                                     source=str(table_path.parent)))
     for summary_path in RunLayout.summaries_under(path):
         run_dir = summary_path.parent
         if RunLayout(run_dir).is_run():
             for row in read_history(run_dir).itertuples(index=False):
-                rows.append(dict(structure=_structure(str(row.name)),
-                                 train_seed=getattr(row, "seed", np.nan),
-                                 fitness=float(row.fitness),
-                                 budget=getattr(row, "env_steps", row.budget),
-                                 source=str(run_dir)))
+                rows.append(RetrainedRow(structure=_structure(str(row.name)),
+                                         train_seed=getattr(row, "seed", np.nan),
+                                         fitness=float(row.fitness),
+                                         budget=getattr(row, "env_steps", row.budget),
+                                         source=str(run_dir)))
             found = True
             continue
         try:
@@ -496,9 +513,9 @@ def _retrained_in(path: Path) -> tuple[list[dict[str, Any]], bool]:
         except ValueError as err:
             raise RunDirectoryError(str(err)) from None
         if training is not None:
-            rows.append(dict(structure=_structure(str(training.robot)),
-                             train_seed=training.seed, fitness=float(training.fitness),
-                             budget=training.env_steps, source=str(run_dir)))
+            rows.append(RetrainedRow(structure=_structure(str(training.robot)),
+                                     train_seed=training.seed, fitness=float(training.fitness),
+                                     budget=training.env_steps, source=str(run_dir)))
             found = True
     return rows, found
 
@@ -525,7 +542,7 @@ def load_retrained(paths: PathsLike) -> pd.DataFrame:
         FileNotFoundError: If a path does not exist.
         RunDirectoryError: If a path holds no training or evolution run.
     """
-    rows: list[dict[str, Any]] = []
+    rows: list[RetrainedRow] = []
     for path in _as_paths(paths):
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such directory of retrained robots")

@@ -29,7 +29,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import NotRequired, TypedDict, TypeVar
 
 import numpy as np
 import pandas as pd
@@ -167,6 +167,46 @@ def welch_contrast(groups: Sequence[ArrayLike], weights: Sequence[float],
     return Contrast.from_t(estimate, se, df, confidence)
 
 
+class HolmRow(TypedDict):
+    """What Holm's step reads (``question``, ``p``) and adds (``p_holm``, ``reject``)."""
+
+    question: str
+    p: float
+    p_holm: NotRequired[float]
+    reject: NotRequired[bool]
+
+
+Row = TypeVar("Row", bound=HolmRow)
+
+
+class WelchRow(HolmRow):
+    """One row of :func:`run_level_tests`."""
+
+    summary: str
+    runs: str  # runs per method, "/"-joined
+    estimate: float
+    ci_low: float
+    ci_high: float
+    t: float
+    df: float
+
+
+class MixedRow(HolmRow):
+    """One row of :func:`mixed_model_tests`."""
+
+    runs: int
+    robots: int
+    estimate: float
+    se: float
+    ci_low: float
+    ci_high: float
+    t: float
+    df: float
+    sd_between: float
+    sd_within: float
+    converged: bool
+
+
 def run_level_tests(
     runs: pd.DataFrame, summaries: Sequence[str] = RUN_SUMMARIES, alpha: float = 0.05
 ) -> pd.DataFrame:
@@ -185,30 +225,31 @@ def run_level_tests(
         Questions whose methods are missing are left out.
     """
     present = set(runs["method"])
-    rows = []
+    rows: list[WelchRow] = []
     for summary in summaries:
-        part = []
+        part: list[WelchRow] = []
         for name, weights in questions():
             if not set(weights) <= present:
                 continue
             groups = [runs.loc[runs["method"] == m, summary] for m in weights]
             c = welch_contrast(groups, list(weights.values()))
-            part.append(dict(summary=summary, question=name,
-                             runs="/".join(str(len(g)) for g in groups),
-                             estimate=c.estimate, ci_low=c.ci_low, ci_high=c.ci_high,
-                             t=c.t, df=c.df, p=c.p))
+            part.append(WelchRow(summary=summary, question=name,
+                                 runs="/".join(str(len(g)) for g in groups),
+                                 estimate=c.estimate, ci_low=c.ci_low, ci_high=c.ci_high,
+                                 t=c.t, df=c.df, p=c.p))
         rows += _with_holm(part, alpha)
     return pd.DataFrame(rows, columns=["summary", "question", "runs", "estimate", "ci_low",
                                        "ci_high", "t", "df", "p", "p_holm", "reject"])
 
 
-def _with_holm(rows: list[dict[str, Any]], alpha: float) -> list[dict[str, Any]]:
+def _with_holm(rows: list[Row], alpha: float) -> list[Row]:
     """``p_holm`` over the pair rows (the interaction keeps its p) and ``reject``."""
     pairs = [r for r in rows if r["question"] != INTERACTION_NAME]
     for row, adjusted in zip(pairs, holm([r["p"] for r in pairs]), strict=True):
         row["p_holm"] = float(adjusted)
     for row in rows:
-        row.setdefault("p_holm", row["p"])
+        if "p_holm" not in row:
+            row["p_holm"] = row["p"]
         row["reject"] = bool(row["p_holm"] <= alpha)
     return rows
 
@@ -307,7 +348,7 @@ def mixed_model_tests(robots: pd.DataFrame, value: str = "fitness",
         ``estimate``, ``se``, ``ci_low``, ``ci_high``, ``t``, ``df``, ``p``, ``p_holm``,
         ``reject``, ``sd_between``, ``sd_within`` and ``converged``.
     """
-    rows = []
+    rows: list[MixedRow] = []
     for name, weights in questions():
         part = robots[robots["method"].isin(list(weights))]
         try:
@@ -315,10 +356,10 @@ def mixed_model_tests(robots: pd.DataFrame, value: str = "fitness",
         except (ValueError, np.linalg.LinAlgError):  # too few runs, or a singular fit
             continue
         c = fit.contrast
-        rows.append(dict(question=name, runs=part["run"].nunique(), robots=len(part),
-                         estimate=c.estimate, se=c.se, ci_low=c.ci_low, ci_high=c.ci_high,
-                         t=c.t, df=c.df, p=c.p, sd_between=fit.sd_between,
-                         sd_within=fit.sd_within, converged=fit.converged))
+        rows.append(MixedRow(question=name, runs=part["run"].nunique(), robots=len(part),
+                             estimate=c.estimate, se=c.se, ci_low=c.ci_low, ci_high=c.ci_high,
+                             t=c.t, df=c.df, p=c.p, sd_between=fit.sd_between,
+                             sd_within=fit.sd_within, converged=fit.converged))
     rows = _with_holm(rows, alpha)
     return pd.DataFrame(rows, columns=["question", "runs", "robots", "estimate", "se", "ci_low",
                                        "ci_high", "t", "df", "p", "p_holm", "reject",

@@ -48,7 +48,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -56,11 +56,19 @@ import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 from omegaconf import DictConfig, OmegaConf
 
-from analysis.bootstrap import Resampling, bootstrap_ci
+from analysis.bootstrap import Resampling, Statistic, bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
 from evo.record import read_curve
+
+if TYPE_CHECKING:
+    from evo.edge import TrainingParts
+    from evo.envs.params import EnvConfig
+    from evo.evaluation import Job, Outcome
+    from evo.learners.common import LearnerConfig
+    from evo.robot import GeneratorParams, Limits, Robot
+    from evo.robot.builder import PhysicsParams
 
 ESTIMATORS: dict[str, str] = {
     "fitness": "Eq. 8: mean return of every episode completed in training",
@@ -80,6 +88,37 @@ PROGRESS = "progress.json"
 TRAINING_COLUMNS = ("name", "structure", "role", "learner", "replicate", "seed", "budget",
                     "fitness", "fitness_late", "episodes", "env_steps", "wall_seconds")
 """``role``: ``seed`` (one of the K trainings) or ``baseline`` (the random learner)."""
+
+
+class TrainingRow(TypedDict):
+    """One row of ``trainings.csv``: the columns of :data:`TRAINING_COLUMNS`."""
+
+    name: str
+    structure: str
+    role: str
+    learner: str
+    replicate: int
+    seed: int
+    budget: int
+    fitness: float
+    fitness_late: float
+    episodes: int
+    env_steps: int
+    wall_seconds: float
+
+
+class Summary(TypedDict):
+    """``summary.json`` of a noise-ceiling folder."""
+
+    settings: dict[str, object]  # Settings.to_json() without the resolved config
+    command: str
+    trainings: int
+    env_steps: int
+    wall_seconds: float
+    training_seconds: float
+    steps_per_second: float
+    metrics: dict[str, dict[str, float]]  # estimator -> metric (and CI bound) -> value
+
 
 # ---------------------------------------------------------------- metrics
 
@@ -108,7 +147,7 @@ def top_quarter(a: ArrayLike, b: ArrayLike, axis: int = -1) -> Any:
     return top_recall(a, b, share=TOP_SHARE, axis=axis)
 
 
-def _pairwise_mean(metric: Callable[..., Any], k: int) -> Callable[..., Any]:
+def _pairwise_mean(metric: Statistic, k: int) -> Statistic:
     """``metric`` of two seed columns, averaged over all pairs of ``k`` columns."""
     pairs = list(itertools.combinations(range(k), 2))
 
@@ -118,7 +157,7 @@ def _pairwise_mean(metric: Callable[..., Any], k: int) -> Callable[..., Any]:
     return mean
 
 
-def _clears(k: int) -> Callable[..., Any]:
+def _clears(k: int) -> Statistic:
     """Share of rows whose mean over the first ``k`` columns exceeds the last column by
     more than :data:`CLEAR_MARGIN`."""
 
@@ -164,7 +203,7 @@ def noise_ceiling(
     if k < 2:
         raise ValueError(f"noise ceiling needs at least two values of {seed!r}, got {k}")
     columns = [wide[c].to_numpy(dtype=float) for c in wide.columns]
-    statistics: dict[str, Callable[..., Any]] = {
+    statistics: dict[str, Statistic] = {
         "spearman": _pairwise_mean(spearman, k), "kendall": _pairwise_mean(kendall, k),
         "icc": icc, "top_quarter": _pairwise_mean(top_quarter, k),
     }
@@ -180,7 +219,7 @@ def noise_ceiling(
     return pd.Series(dict(**out, n_structures=len(wide), n_seeds=k))
 
 
-def _with_ci(name: str, columns: list[NDArray[np.float64]], statistic: Callable[..., Any],
+def _with_ci(name: str, columns: list[NDArray[np.float64]], statistic: Statistic,
              resampling: Resampling) -> dict[str, float]:
     if len(columns[0]) < 3:
         return {name: np.nan, f"{name}_low": np.nan, f"{name}_high": np.nan}
@@ -302,7 +341,7 @@ class Settings:
 
     @classmethod
     def of(cls, cfg: DictConfig, overrides: Sequence[str], *, budget: int, seeds: int,
-           root_seed: int, baseline: bool, robots: Sequence[Any]) -> Settings:
+           root_seed: int, baseline: bool, robots: Sequence[Robot]) -> Settings:
         """The settings of a noise ceiling of ``robots`` under the composed ``cfg``."""
         kept = OmegaConf.to_container(cfg, resolve=True)
         assert isinstance(kept, dict)
@@ -316,7 +355,7 @@ class Settings:
 
 
 def load_structures(robots: Path | None, random_count: int | None, seed: int,
-                    cfg: DictConfig) -> list[Any]:
+                    cfg: DictConfig) -> list[Robot]:
     """The robots to train: every ``*.json`` of ``robots``, or ``random_count`` random
     robots of distinct structure drawn with ``seed`` (as ``task=robots`` draws them).
 
@@ -325,7 +364,7 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int,
             robot (named), or fewer than three robots.
     """
     from evo.edge import generator_of, limits_of
-    from evo.robot import InvalidRobotError, Robot, RobotFileError, load_robot, random_robots
+    from evo.robot import InvalidRobotError, RobotFileError, load_robot, random_robots
 
     if robots is not None:
         if not robots.is_dir():
@@ -357,7 +396,8 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int,
     return chosen
 
 
-def _what_trains(config: str) -> tuple[Any, ...] | None:
+def _what_trains(config: str) -> tuple[PhysicsParams, EnvConfig, LearnerConfig,
+                                      GeneratorParams, Limits] | None:
     """The typed groups of a resolved config that decide a training's result (physics,
     env, learner, robot generation and limits), defaults filled in; None if it does not
     parse. Other groups (the GA's, recording) leave the numbers as they are."""
@@ -410,7 +450,7 @@ def read_trainings(out: Path) -> pd.DataFrame:
     return pd.read_csv(path)
 
 
-def _jobs(out: Path, parts: Any, settings: Settings) -> dict[str, Any]:
+def _jobs(out: Path, parts: TrainingParts, settings: Settings) -> dict[str, Job]:
     """The evaluation job of each role: ``seed`` (the learner) and ``baseline`` (the
     random learner: the same network, never updated)."""
     from evo.evaluation import Job
@@ -423,12 +463,12 @@ def _jobs(out: Path, parts: Any, settings: Settings) -> dict[str, Any]:
 
 
 def _training_row(out: Path, training: Training, learner: str, settings: Settings,
-                  outcome: Any) -> dict[str, Any]:
+                  outcome: Outcome) -> TrainingRow:
     """The ``trainings.csv`` row of one finished training."""
     from evo.run.layout import RunLayout
 
     curve = read_curve(RunLayout(out).curve(training.name))
-    return dict(
+    return TrainingRow(
         name=training.name, structure=training.structure, role=training.role, learner=learner,
         replicate=training.replicate, seed=training.seed, budget=settings.budget,
         fitness=outcome.fitness, fitness_late=late_fitness(curve, settings.budget),
@@ -436,7 +476,7 @@ def _training_row(out: Path, training: Training, learner: str, settings: Setting
         wall_seconds=outcome.wall_seconds)
 
 
-def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequence[Any],
+def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequence[Robot],
                   log: Callable[[str], None] = print) -> pd.DataFrame:
     """Train every planned training not yet in ``trainings.csv``, through the config's
     executor, appending each result as it arrives (and the wall time so far, over every
@@ -459,7 +499,7 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
     store.prepare()
     for robot in robots:
         store.save_robot(robot.name, robot)
-    rows = read_trainings(out).to_dict("records")
+    rows: list[TrainingRow] = read_trainings(out).to_dict("records")
     done = {row["name"] for row in rows}
     plan = plan_trainings(settings.structures, seeds=settings.seeds, root=settings.root_seed,
                           baseline=settings.baseline and parts.learner.update)
@@ -467,7 +507,7 @@ def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequen
     log(f"{len(plan) - len(todo)} of {len(plan)} trainings already done; {len(todo)} to run")
     wall_before, start = wall_seconds(out), time.perf_counter()
     executor = executor_of(cfg)
-    running: dict[Future[Any], tuple[Training, Candidate]] = {}
+    running: dict[Future[Outcome], tuple[Training, Candidate]] = {}
     try:
         while todo or running:
             while todo and len(running) < executor.workers:
@@ -525,7 +565,7 @@ def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
     plot_seed_scatter(seeds, base, estimators=list(ESTIMATORS), ceiling=table,
                       margin=CLEAR_MARGIN, path=out / "noise_ceiling.png")
     steps = int(trainings["env_steps"].sum())
-    summary = dict(
+    summary = Summary(
         settings=settings.to_json() | {"config": None}, command=command,
         trainings=len(trainings), env_steps=steps, wall_seconds=wall_seconds,
         training_seconds=float(trainings["wall_seconds"].sum()),
@@ -540,7 +580,7 @@ def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
 
 
 def _markdown(table: pd.DataFrame, trainings: pd.DataFrame, settings: Settings,
-              summary: dict[str, Any]) -> str:
+              summary: Summary) -> str:
     cells = pd.DataFrame({
         "estimator": table["estimator"],
         **{metric: [fmt_ci(r[metric], r[f"{metric}_low"], r[f"{metric}_high"])

@@ -42,6 +42,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
 if TYPE_CHECKING:
     import pandas as pd
+    from hydra.core.override_parser.types import Override
 
 STORAGE = "optuna.db"
 """The study's SQLite file in the sweep folder."""
@@ -175,7 +176,7 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
 # ---------------------------------------------------------------- checks and resumption
 
 
-def _sweep_of(text: str, key: str) -> Any:
+def _sweep_of(text: str, key: str) -> Override:
     """The parsed override ``key=text``; a parse error names the key."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
@@ -187,7 +188,7 @@ def _sweep_of(text: str, key: str) -> Any:
         raise SweepError(f"hydra.sweeper.params.{key}: cannot parse {text!r} ({reason})") from None
 
 
-def _check_range(override: Any, key: str, text: str) -> None:
+def _check_range(override: Override, key: str, text: str) -> None:
     """Refuse a choice with no option, a range or interval with nothing in it."""
     from hydra.core.override_parser.types import ChoiceSweep, IntervalSweep, RangeSweep
 
@@ -202,14 +203,14 @@ def _check_range(override: Any, key: str, text: str) -> None:
                          "value (a range needs start <= stop, an interval start < end)")
 
 
-def _check_key(override: Any, key: str, config: DictConfig, conf_dir: Path) -> None:
+def _check_key(override: Override, key: str, config: DictConfig, conf_dir: Path) -> None:
     """Refuse a parameter that names no config key and no config group option."""
     name = override.key_or_group
     group = conf_dir / name.replace(".", "/")
     if group.is_dir():
         options = (list(override.sweep_iterator()) if override.is_sweep_override()
                    else [override.value()])
-        missing = [o for o in options if not (group / f"{o}.yaml").is_file()]
+        missing = [str(o) for o in options if not (group / f"{o}.yaml").is_file()]
         if missing:
             raise SweepError(f"hydra.sweeper.params.{key}: no option {', '.join(missing)} "
                              f"in the config group {name} (conf/{name.replace('.', '/')}/)")

@@ -37,6 +37,7 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import pandas as pd
@@ -232,7 +233,7 @@ def select_robots(robots: pd.DataFrame, run: str, n: int = LEARNING_CURVES) -> l
     rows = robots[(robots["run"] == run) & np.isfinite(robots["fitness"])]
     rows = rows.sort_values("fitness", ascending=False)
     picks = np.unique(np.linspace(0, len(rows) - 1, min(n, len(rows))).round().astype(int))
-    return rows["name"].iloc[picks].tolist()
+    return cast(list[str], rows["name"].iloc[picks].tolist())  # pandas is untyped
 
 
 def ablation_figures(

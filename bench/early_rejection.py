@@ -27,6 +27,7 @@ import itertools
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NotRequired, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -60,10 +61,23 @@ def replay(robots: pd.DataFrame, curves: pd.DataFrame, population_sizes: dict[st
     return pd.DataFrame(rows)
 
 
-def score(offspring: pd.DataFrame, all_steps: float) -> dict[str, float]:
+class Score(TypedDict):
+    """A rule's replay (:func:`score`); with no offspring, only their count."""
+
+    offspring: int
+    accepted: NotRequired[int]
+    stopped: NotRequired[int]
+    false_rejections: NotRequired[float]  # share of the accepted offspring the rule stops
+    ci_low: NotRequired[float]  # Wilson CI of false_rejections
+    ci_high: NotRequired[float]
+    saved: NotRequired[float]  # share of the rejected offspring's env steps saved
+    schedule: NotRequired[float]  # all env steps over those left to train
+
+
+def score(offspring: pd.DataFrame, all_steps: float) -> Score:
     """False rejections (with a Wilson CI), env steps saved, schedule ratio."""
     if offspring.empty:
-        return dict(offspring=0)
+        return Score(offspring=0)
     accepted = offspring[offspring["accepted"]]
     false = int(accepted["stopped"].sum())
     ci = (scipy.stats.binomtest(false, len(accepted)).proportion_ci(method="wilson")
@@ -71,7 +85,7 @@ def score(offspring: pd.DataFrame, all_steps: float) -> dict[str, float]:
     rejected = offspring[~offspring["accepted"]]
     saved = float(((1 - rejected["fraction"]) * rejected["budget"]).sum())
     lost = float(((1 - accepted["fraction"]) * accepted["budget"]).sum())
-    return dict(
+    return Score(
         offspring=len(offspring), accepted=len(accepted), stopped=int(offspring["stopped"].sum()),
         false_rejections=false / len(accepted) if len(accepted) else np.nan,
         ci_low=ci.low if ci else np.nan, ci_high=ci.high if ci else np.nan,

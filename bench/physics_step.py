@@ -36,6 +36,7 @@ import glob
 import time
 
 import numpy as np
+from numpy.typing import NDArray
 
 from evo.envs.arena import ArenaParams
 from evo.envs.params import TaskParams
@@ -80,7 +81,7 @@ def cpu_rate(core: ReachCore, steps: int, rng: np.random.Generator) -> float:
     return core.num_envs * steps / (time.process_time() - start)
 
 
-def actions(core: ReachCore, steps: int, seed: int = 0) -> np.ndarray:
+def actions(core: ReachCore, steps: int, seed: int = 0) -> NDArray[np.float64]:
     """A fixed action sequence, (steps, arenas, actuators): uniform in [-1, 1], each draw
     held for :data:`HOLD` control steps."""
     rng = np.random.default_rng(seed)
@@ -88,7 +89,8 @@ def actions(core: ReachCore, steps: int, seed: int = 0) -> np.ndarray:
     return np.repeat(draws, HOLD, axis=0)[:steps]
 
 
-def module_paths(core: ReachCore, sequence: np.ndarray) -> tuple[np.ndarray, int, int]:
+def module_paths(core: ReachCore, sequence: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], int, int]:
     """Module positions after every control step (steps, arenas, modules, 3), and the
     unstable episodes and MuJoCo warnings of the run."""
     core.reset()
@@ -102,7 +104,7 @@ def module_paths(core: ReachCore, sequence: np.ndarray) -> tuple[np.ndarray, int
     return np.stack(paths), unstable, core.warning_count
 
 
-def rms(a: np.ndarray, b: np.ndarray) -> float:
+def rms(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
     """RMS over everything of the distance between matching points of two paths, m."""
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=-1))))
 

@@ -58,7 +58,8 @@ def policies_equal(a: Path, b: Path) -> bool:
             return False
         if not all(torch.equal(sa[part][k], sb[part][k]) for k in sa[part]):
             return False
-    return sa["obs_size"] == sb["obs_size"] and sa["action_size"] == sb["action_size"]
+    sizes = [(int(s["obs_size"]), int(s["action_size"])) for s in (sa, sb)]
+    return sizes[0] == sizes[1]
 
 
 def compare(before: Path, after: Path) -> list[str]:

@@ -140,7 +140,11 @@ def profile_by_library(run: Callable[[], object], title: str, top: int = 3) -> T
     profile.runcall(run)
     own: dict[str, float] = defaultdict(float)
     functions: dict[str, list[tuple[float, str]]] = defaultdict(list)
-    for (filename, line, function), row in pstats.Stats(profile).stats.items():  # type: ignore[attr-defined]
+    # Stats keeps its per-function table in ``stats``, an attribute typeshed does not declare:
+    # (file, line, function) -> (primitive calls, calls, own time, cumulative time, callers).
+    entries: dict[tuple[str, int, str], tuple[int, int, float, float, dict[object, object]]]
+    entries = pstats.Stats(profile).stats  # type: ignore[attr-defined]
+    for (filename, line, function), row in entries.items():
         library, seconds = library_of(filename, function), row[2]
         own[library] += seconds
         functions[library].append((seconds, f"{Path(filename).name}:{line}({function})"

@@ -179,6 +179,7 @@ def test_a_bad_sweep_stops_at_once_with_one_line(sweeper: None, tmp_path: Path) 
     ({"learner.gamma": "interval(0.9, 0.9)"}, "learner.gamma: interval(0.9, 0.9) is empty"),
     ({"learner.teleport": "choice(1, 2)"}, "learner.teleport: unknown parameter"),
     ({"physics_step": "choice(dt5ms_x10, dt1ms_x50)"}, "no option dt1ms_x50"),
+    ({"physics_step": "choice(1, 2)"}, "no option 1, 2"),  # options parsed as numbers
     ({"+learner.teleport": "choice(1, 2)"}, "+learner.teleport: unknown parameter"),
     ({"learner.epochs": "choice()"}, "learner.epochs"),
 ])
