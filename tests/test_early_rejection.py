@@ -183,6 +183,7 @@ def early_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.slow
+@pytest.mark.long  # SIGKILL and resume of the loop itself: test_evolution
 def test_resume_after_a_kill_during_an_early_stopped_evaluation(
     early_reference: Path, tmp_path: Path
 ) -> None:

@@ -456,6 +456,7 @@ def evo_lines(stderr: str) -> list[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.long  # seven sessions of one run; in-process: tests/test_write_failures.py
 def test_a_full_disk_at_each_kind_of_write_stops_the_run_and_resume_completes_it(
     tmp_path: Path, serial_reference: Path
 ) -> None:
