@@ -38,7 +38,6 @@ than the population's worst).
 
 from __future__ import annotations
 
-import argparse
 import math
 import shlex
 import sys
@@ -64,7 +63,7 @@ from analysis.load import (
     run_ids,
 )
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table
-from analysis.report import report_folder, run_report
+from analysis.report import parser, report_folder, run_report
 from evo.run.layout import RunLayout
 from evo.run.records import RunSummary, read_run_summary
 
@@ -564,15 +563,8 @@ def report_markdown(tables: Tables, runs: Sequence[InheritanceRun], command: str
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m analysis.inheritance RUNS... --out DIR``; exit 0, or 2 on a bad input."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    cli = argparse.ArgumentParser(
-        prog="python -m analysis.inheritance",
-        description="Evolution with policy inheritance against without it, at equal cost.")
-    cli.add_argument("runs", nargs="+", type=Path,
-                     help="run directories, or folders holding them, of both methods")
-    cli.add_argument("--out", type=Path, required=True, help="report folder (created)")
-    cli.add_argument("--seed", type=int, default=0, help="bootstrap seed")
-    cli.add_argument("--resamples", type=int, default=2000,
-                     help="bootstrap resamples per confidence interval")
+    cli = parser("Evolution with policy inheritance against without it, at equal cost.",
+                 prog="python -m analysis.inheritance", first=False)
     args = cli.parse_args(argv)
     command = shlex.join(["python", "-m", "analysis.inheritance", *argv])
     return run_report(lambda: write_inheritance(

@@ -432,9 +432,10 @@ def report_folder(out: str | Path) -> Path:
     return out
 
 
-def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser:
+def parser(description: str, prog: str | None = None,
+           first: bool = True) -> argparse.ArgumentParser:
     """The arguments every report CLI takes: run directories, ``--out``, ``--seed``,
-    ``--resamples``."""
+    ``--resamples`` (and ``--first``, unless ``first`` is false)."""
     cli = argparse.ArgumentParser(prog=prog, description=description)
     cli.add_argument("runs", nargs="+", type=Path,
                      help="run directories, or folders holding them (a multirun folder)")
@@ -442,6 +443,8 @@ def parser(description: str, prog: str | None = None) -> argparse.ArgumentParser
     cli.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     cli.add_argument("--resamples", type=int, default=2000,
                      help="bootstrap resamples per confidence interval")
+    if not first:
+        return cli
     cli.add_argument("--first", type=_positive, default=None, metavar="N",
                      help="only each run's first N robots (runs of different lengths "
                           "compared over the same robots)")
