@@ -20,12 +20,15 @@ process. SIGINT is ignored there (Ctrl-C reaches the whole process group; the ma
 process decides). SIGTERM inside an evaluation raises :class:`Interrupted` (held back
 in a :func:`critical` block, as in the main process), so the evaluation's recorder
 closes its files, and the worker then exits (:func:`guarded`); SIGTERM between
-evaluations exits at once.
+evaluations exits at once. A worker whose parent died and that is still alive
+:data:`ORPHAN_GRACE_S` seconds later (its cleanup waits in C code, where no signal
+handler runs) is ended (with its threads' tracebacks on stderr): no worker outlives its parent.
 """
 
 from __future__ import annotations
 
 import ctypes
+import faulthandler
 import os
 import signal
 import threading
@@ -42,6 +45,9 @@ EXIT_CODES = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 HOLD_S = 3.0
 """Longest a critical block holds back a signal, seconds."""
+
+ORPHAN_GRACE_S = 10.0
+"""Longest a worker whose parent died spends closing its files before it exits anyway."""
 
 
 class Interrupted(BaseException):  # noqa: N818 - like KeyboardInterrupt, not an error
@@ -164,6 +170,9 @@ def worker_init(parent: int) -> None:
     def watch() -> None:
         while os.getppid() == parent:
             time.sleep(1.0)
+        # A C-level timer (it needs no GIL) ends the process should the cleanup the
+        # SIGTERM starts wait in C code, where no Python signal handler runs.
+        faulthandler.dump_traceback_later(ORPHAN_GRACE_S, exit=True)
         os.kill(os.getpid(), signal.SIGTERM)
 
     threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()

@@ -8,7 +8,8 @@ End to end through ``python evo/main.py`` in subprocesses with real (tiny) train
   SIGKILLed holder does not block the next resume;
 * SIGTERM and SIGINT stop a run with one line and exit 143 or 130, leave no worker
   process alive, and the resumed run is the uninterrupted one (serial);
-* SIGKILL of the main process alone takes its workers with it;
+* SIGKILL of the main process alone takes its workers with it, even a worker whose
+  cleanup no signal reaches;
 * a full disk at each kind of write (state, history, robot file, policy, MCAP and rerun
   recordings) stops the run with one line and exit 1, and the resumed run is the
   uninterrupted one.
@@ -303,7 +304,7 @@ def test_a_second_process_is_refused_and_a_killed_holder_does_not_block(
     run_dir = tmp_path / "run"
     shutil.copytree(serial_reference, run_dir)
     holder = subprocess.Popen([sys.executable, "-c", HOLD, str(run_dir)], env=ENV,
-                              stdout=subprocess.PIPE, text=True)
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
         for second in (main_cmd(f"resume={run_dir}"),
@@ -410,6 +411,36 @@ def test_workers_die_with_a_sigkilled_main_process(tmp_path: Path) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+ORPHAN = """
+import os, signal, subprocess, sys, time
+if sys.argv[1] == "worker":
+    import evo.interrupt
+    evo.interrupt.ORPHAN_GRACE_S = 1.0
+    evo.interrupt.worker_init(os.getppid())
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a cleanup that no signal reaches
+    print("ready", flush=True)
+    time.sleep(120)
+else:
+    worker = subprocess.Popen([sys.executable, "-c", sys.argv[2], "worker"],
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    assert worker.stdout is not None and worker.stdout.readline() == "ready\\n"
+    print(worker.pid, flush=True)
+    os._exit(0)  # the parent dies; its worker is left
+"""
+
+
+def test_a_worker_deaf_to_signals_still_dies_with_its_parent() -> None:
+    parent = subprocess.run([sys.executable, "-c", ORPHAN, "parent", ORPHAN], env=ENV, cwd=REPO,
+                            capture_output=True, text=True, timeout=60)
+    assert parent.returncode == 0, parent.stderr[-3000:]
+    worker = int(parent.stdout)
+    try:
+        wait_until(lambda: not alive(worker), 15, "the orphaned worker gone")
+    finally:
+        if alive(worker):
+            os.kill(worker, signal.SIGKILL)
 
 
 @pytest.mark.slow
