@@ -86,8 +86,10 @@ TRAININGS = "trainings.csv"
 SETTINGS = "settings.json"
 PROGRESS = "progress.json"
 TRAINING_COLUMNS = ("name", "structure", "role", "learner", "replicate", "seed", "budget",
-                    "fitness", "fitness_late", "episodes", "env_steps", "wall_seconds")
-"""``role``: ``seed`` (one of the K trainings) or ``baseline`` (the random learner)."""
+                    "fitness", "fitness_late", "episodes", "env_steps", "wall_seconds",
+                    "cpu_seconds")
+"""``role``: ``seed`` (one of the K trainings) or ``baseline`` (the random learner);
+``cpu_seconds``: the training's CPU time (its cost, whatever else the machine ran)."""
 
 
 class TrainingRow(TypedDict):
@@ -105,6 +107,7 @@ class TrainingRow(TypedDict):
     episodes: int
     env_steps: int
     wall_seconds: float
+    cpu_seconds: float
 
 
 class Summary(TypedDict):
@@ -443,11 +446,14 @@ def open_folder(out: Path, settings: Settings) -> None:
 
 
 def read_trainings(out: Path) -> pd.DataFrame:
-    """``trainings.csv`` of a noise-ceiling folder (empty when it has none yet)."""
+    """``trainings.csv`` of a noise-ceiling folder (empty when it has none yet); a
+    column that an older folder lacks (``cpu_seconds``) reads as missing values."""
     path = out / TRAININGS
     if not path.is_file():
         return pd.DataFrame(columns=list(TRAINING_COLUMNS))
-    return pd.read_csv(path)
+    table = pd.read_csv(path)
+    return table.reindex(columns=[*table.columns, *(c for c in TRAINING_COLUMNS
+                                                    if c not in table.columns)])
 
 
 def _jobs(out: Path, parts: TrainingParts, settings: Settings) -> dict[str, Job]:
@@ -473,7 +479,7 @@ def _training_row(out: Path, training: Training, learner: str, settings: Setting
         replicate=training.replicate, seed=training.seed, budget=settings.budget,
         fitness=outcome.fitness, fitness_late=late_fitness(curve, settings.budget),
         episodes=outcome.episodes, env_steps=outcome.env_steps,
-        wall_seconds=outcome.wall_seconds)
+        wall_seconds=outcome.wall_seconds, cpu_seconds=outcome.cpu_seconds)
 
 
 def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequence[Robot],

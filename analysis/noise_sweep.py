@@ -10,8 +10,8 @@ config: the same fixed sample of random robots (``noise_sweep.robots``, drawn wi
 ``noise_sweep.robot_seed``), each trained ``noise_sweep.seeds`` times at
 ``noise_sweep.budget`` env steps, without the random-learner baseline. It returns two
 objectives to Optuna: the seed-to-seed agreement ``noise_sweep.objective`` of Eq. 8
-fitness (maximised) and the cost, core-seconds per robot (minimised: the mean wall
-time of one training, each of which holds one core).
+fitness (maximised) and the cost, core-seconds per robot (minimised: the mean CPU
+time of one training's process, which other load on the machine hardly changes).
 
 The study lives in ``<hydra.sweep.dir>/optuna.db`` (SQLite). :class:`SweepCheck`, a
 Hydra callback run before the sweeper starts, stops a bad sweep at once with one line
@@ -161,7 +161,7 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     metrics = summary["metrics"]["fitness"]
     result = TrialResult(
         objective=sweep.objective, value=float(metrics[sweep.objective]),
-        core_seconds_per_robot=float(pd.to_numeric(trainings["wall_seconds"]).mean()),
+        core_seconds_per_robot=float(pd.to_numeric(trainings["cpu_seconds"]).mean()),
         spearman=float(metrics["spearman"]), icc=float(metrics["icc"]),
         top_quarter=float(metrics["top_quarter"]),
         env_steps_per_second=float(trainings["env_steps"].sum()

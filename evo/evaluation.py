@@ -104,6 +104,9 @@ class Outcome:
     env_steps: int = 0
     episodes: int = 0
     wall_seconds: float = 0.0
+    cpu_seconds: float = 0.0
+    """CPU time of the evaluation's process (all its threads): its cost in core-seconds,
+    which unlike ``wall_seconds`` does not grow with the machine's other load."""
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
     stopped_early: bool = False
@@ -201,7 +204,7 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
         learner: The training function; by default the one ``job.learner`` names.
     """
 
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     try:
         robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
         train = get_learner(job.learner) if learner is None else learner
@@ -214,12 +217,14 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
             # raising ``full`` again would reorder its chain, where the first is the deepest.
             raise WriteFailed(full.errno, full.strerror, full.filename) from err
         return Outcome(candidate.birth, candidate.name, wall_seconds=time.perf_counter() - start,
+                       cpu_seconds=time.process_time() - cpu_start,
                        error=error_cell(err, candidate, job))
     finally:
         # The evaluation's reference cycles (recording streams among them) hold native
         # memory that a long-lived worker would otherwise keep until a rare full collection.
         gc.collect()
-    return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start)
+    return dataclasses.replace(outcome, wall_seconds=time.perf_counter() - start,
+                               cpu_seconds=time.process_time() - cpu_start)
 
 
 def inheritance(candidate: Candidate, layout: RunLayout) -> Inheritance | None:

@@ -152,6 +152,10 @@ def test_immobile_structures_rank_last_and_seeds_agree(
     assert metrics["clears_baseline"] == pytest.approx(0.5), "the movers learn, no one else"
     assert set(movers) == {names[s] for s in MOVERS}
     assert summary["env_steps"] == int(trainings["env_steps"].sum())
+    # A training's cost is its process's CPU time: spent, and within its wall time on
+    # the one thread a worker trains with (a little slack for the clocks' resolution).
+    assert (trainings["cpu_seconds"] > 0).all(), trainings
+    assert (trainings["cpu_seconds"] <= trainings["wall_seconds"] * 1.05 + 0.05).all(), trainings
     assert (out / "noise_ceiling.png").stat().st_size > 0
     text = (out / nc.REPORT).read_text()
     assert "| fitness |" in text and "| fitness_late |" in text
