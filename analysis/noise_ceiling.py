@@ -22,31 +22,35 @@ each with a bootstrap CI over structures, for every fitness estimator:
 No early predictor can rank structures by fitness better than a second training does,
 so the same numbers bound the early-slope study (``analysis.early_slope_report``).
 
+The trainings are ``evo.retrain``'s (the ``retrain`` task of ``evo/main.py``):
+
+    python evo/main.py +exp=retrain noise_ceiling.random=24 noise_ceiling.budget=100000 \
+        hydra.run.dir=runs/noise [overrides...]
+
 ``python -m analysis.noise_ceiling --robots DIR | --random N --seed S [--seeds K]
---out DIR [--budget B] [--no-baseline] [overrides...]`` trains through the config's
-executor (both cores locally, a cluster with ``executor=ray``), with the learner and
-env groups composed exactly as ``python evo/main.py <overrides>`` composes them. It is
-resumable: run it again with the same arguments and finished trainings are reused.
-It writes into DIR ``trainings.csv`` (one row per training), ``noise_ceiling.md``,
+--out DIR [--budget B] [--no-baseline] [--resamples R] [overrides...]`` is the same
+task under its older command line: ``--out`` is the run directory, the other options
+are the ``noise_ceiling`` keys (``--seed`` the root seed), and the overrides compose
+the config exactly as ``python evo/main.py <overrides>`` composes it. Either way the
+trainings run through the config's executor (both cores locally, a cluster with
+``executor=ray``) and resume: run it again with the same arguments and finished
+trainings are reused. This module turns them into ``noise_ceiling.md``,
 ``noise_ceiling.csv`` (the metrics), ``noise_ceiling.png`` (fitness under one seed
 against another, one point per structure) and ``summary.json`` (settings, command,
-env steps, wall time, metrics), beside ``robots/`` and ``evals/`` (each training's
-learning curve and policy, and recordings if ``record`` asks for them).
+env steps, wall time, metrics), beside ``trainings.csv`` (one row per training),
+``robots/`` and ``evals/`` (each training's learning curve and policy, and recordings
+if ``record`` asks for them).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import json
 import shlex
 import sys
-import time
 import warnings
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, wait
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
 
@@ -54,21 +58,28 @@ import numpy as np
 import pandas as pd
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
-from omegaconf import DictConfig, OmegaConf
 
 from analysis.bootstrap import Resampling, Statistic, bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
-from evo.record import read_curve
+from evo.retrain import (
+    TRAINING_COLUMNS,
+    RetrainConfig,
+    RetrainError,
+    Settings,
+    Training,
+    TrainingRow,
+    late_fitness,
+    plan_trainings,
+    read_trainings,
+    training_seed,
+    wall_seconds,
+)
+from evo.run.layout import CEILING_REPORT, PROGRESS, RETRAIN_SETTINGS, TRAININGS, RetrainLayout
 
 if TYPE_CHECKING:
-    from evo.edge import TrainingParts
-    from evo.envs.params import EnvConfig
-    from evo.evaluation import Job, Outcome
-    from evo.learners.common import LearnerConfig
-    from evo.robot import GeneratorParams, Limits, Robot
-    from evo.robot.builder import PhysicsParams
+    from omegaconf import DictConfig
 
 ESTIMATORS: dict[str, str] = {
     "fitness": "Eq. 8: mean return of every episode completed in training",
@@ -81,33 +92,19 @@ CLEAR_MARGIN = 0.01
 """Fitness by which a structure must beat the random learner to count as learning: a
 hundredth of the time penalty's range, well above the float noise of a robot that
 cannot move (its fitness is −1 to about 1e-6)."""
-REPORT = "noise_ceiling.md"
-TRAININGS = "trainings.csv"
-SETTINGS = "settings.json"
-PROGRESS = "progress.json"
-TRAINING_COLUMNS = ("name", "structure", "role", "learner", "replicate", "seed", "budget",
-                    "fitness", "fitness_late", "episodes", "env_steps", "wall_seconds",
-                    "cpu_seconds")
-"""``role``: ``seed`` (one of the K trainings) or ``baseline`` (the random learner);
-``cpu_seconds``: the training's CPU time (its cost, whatever else the machine ran)."""
+REPORT = CEILING_REPORT
+SETTINGS = RETRAIN_SETTINGS
+NoiseCeilingError = RetrainError
+"""A bad argument or output folder; the message names it."""
 
 
-class TrainingRow(TypedDict):
-    """One row of ``trainings.csv``: the columns of :data:`TRAINING_COLUMNS`."""
+class TooFewTrainings(RetrainError):
+    """Fewer than 3 structures have two finished trainings: no rank correlation yet."""
 
-    name: str
-    structure: str
-    role: str
-    learner: str
-    replicate: int
-    seed: int
-    budget: int
-    fitness: float
-    fitness_late: float
-    episodes: int
-    env_steps: int
-    wall_seconds: float
-    cpu_seconds: float
+__all__ = ["PROGRESS", "TRAININGS", "TRAINING_COLUMNS", "RetrainConfig", "Settings",
+           "Training", "TrainingRow", "late_fitness", "plan_trainings", "read_trainings",
+           "training_seed"]
+"""What the trainings' module (``evo.retrain``) owns, named here as before."""
 
 
 class Summary(TypedDict):
@@ -234,24 +231,6 @@ def _with_ci(name: str, columns: list[NDArray[np.float64]], statistic: Statistic
     return {name: estimate, f"{name}_low": low, f"{name}_high": high}
 
 
-def late_fitness(curve: pd.DataFrame, budget: float) -> float:
-    """Mean return of the episodes completed after half the budget (``fitness_late``).
-
-    Args:
-        curve: A learning curve (``env_steps``, ``train/episodes``, ``train/mean_return`` per
-            batch).
-        budget: The training's budget, env steps.
-
-    Returns:
-        The episode-weighted mean; NaN when no episode ended in the second half.
-    """
-    late = curve[(curve["env_steps"] > budget / 2) & (curve["train/episodes"] > 0)
-                 & np.isfinite(curve["train/mean_return"])]
-    if late["train/episodes"].sum() <= 0:
-        return float("nan")
-    return float(np.average(late["train/mean_return"], weights=late["train/episodes"]))
-
-
 def ceiling_table(trainings: pd.DataFrame, resampling: Resampling) -> pd.DataFrame:
     """Every estimator's noise ceiling from a ``trainings.csv`` table.
 
@@ -279,283 +258,6 @@ def _by_role(trainings: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     return (trainings[trainings["role"] == "seed"], trainings[trainings["role"] == "baseline"])
 
 
-# ---------------------------------------------------------------- trainings
-
-
-@dataclass(frozen=True, slots=True)
-class Training:
-    """One training of one structure.
-
-    Attributes:
-        name: Unique name (file stem in ``evals/``).
-        structure: The robot's name.
-        role: ``seed`` (one of the K trainings) or ``baseline`` (the random learner).
-        replicate: Which of the K trainings of this structure (0-based).
-        seed: Its seed.
-    """
-
-    name: str
-    structure: str
-    role: str
-    replicate: int
-    seed: int
-
-
-def training_seed(root: int, structure: str, replicate: int) -> int:
-    """The seed of a structure's ``replicate``-th training: the same for the same root
-    seed whatever the other structures, the settings or the order of training."""
-    key = int(structure.removeprefix("robot-")[:8], 16)
-    return int(np.random.SeedSequence(root, spawn_key=(key, replicate)).generate_state(1)[0])
-
-
-def plan_trainings(structures: Sequence[str], *, seeds: int, root: int,
-                   baseline: bool) -> list[Training]:
-    """K trainings per structure, and one random-learner training (seed of replicate 0)
-    per structure when ``baseline``."""
-    plan = [Training(f"{s}_s{r}", s, "seed", r, training_seed(root, s, r))
-            for s in structures for r in range(seeds)]
-    if baseline:
-        plan += [Training(f"{s}_baseline", s, "baseline", 0, training_seed(root, s, 0))
-                 for s in structures]
-    return plan
-
-
-# ---------------------------------------------------------------- the tool
-
-
-class NoiseCeilingError(ValueError):
-    """A bad argument or output folder; the message names it."""
-
-
-@dataclass(frozen=True)
-class Settings:
-    """What decides a noise ceiling's numbers (stored in ``settings.json``)."""
-
-    overrides: tuple[str, ...]
-    budget: int
-    seeds: int
-    root_seed: int
-    baseline: bool
-    structures: tuple[str, ...]
-    config: str  # the resolved config without the executor group
-
-    def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def of(cls, cfg: DictConfig, overrides: Sequence[str], *, budget: int, seeds: int,
-           root_seed: int, baseline: bool, robots: Sequence[Robot]) -> Settings:
-        """The settings of a noise ceiling of ``robots`` under the composed ``cfg``."""
-        kept = OmegaConf.to_container(cfg, resolve=True)
-        assert isinstance(kept, dict)
-        kept.pop("executor", None)
-        return cls(tuple(overrides), budget, seeds, root_seed, baseline,
-                   tuple(r.name for r in robots), OmegaConf.to_yaml(OmegaConf.create(kept)))
-
-    COMPARED = ("budget", "seeds", "root_seed", "baseline", "structures", "config")
-    """What must match to continue a folder (the overrides may differ, e.g. the
-    executor, as long as the resolved config without it is the same)."""
-
-
-def load_structures(robots: Path | None, random_count: int | None, seed: int,
-                    cfg: DictConfig) -> list[Robot]:
-    """The robots to train: every ``*.json`` of ``robots``, or ``random_count`` random
-    robots of distinct structure drawn with ``seed`` (as ``task=robots`` draws them).
-
-    Raises:
-        NoiseCeilingError: For an empty or missing folder, a file that is not a valid
-            robot (named), or fewer than three robots.
-    """
-    from evo.edge import generator_of, limits_of
-    from evo.robot import InvalidRobotError, RobotFileError, load_robot, random_robots
-
-    if robots is not None:
-        if not robots.is_dir():
-            raise NoiseCeilingError(f"--robots {robots}: no such folder")
-        files = sorted(robots.glob("*.json"))
-        if not files:
-            raise NoiseCeilingError(f"--robots {robots}: no robot files (*.json) in it")
-        found: dict[str, Robot] = {}
-        for path in files:
-            try:
-                robot = load_robot(path, limits_of(cfg))
-            except (RobotFileError, InvalidRobotError) as err:
-                raise NoiseCeilingError(f"--robots: {err}") from None
-            found.setdefault(robot.name, robot)
-        chosen = list(found.values())
-        what = f"--robots {robots}: {len(chosen)} distinct structure(s)"
-    else:
-        assert random_count is not None
-        if random_count < 3:
-            raise NoiseCeilingError(f"--random: expected at least 3 robots, got {random_count}")
-        rng = np.random.default_rng(seed)
-        try:
-            chosen = random_robots(rng, random_count, generator_of(cfg), limits_of(cfg))
-        except ValueError as err:
-            raise NoiseCeilingError(f"--random {random_count}: {err}") from None
-        what = f"--random {random_count}"
-    if len(chosen) < 3:
-        raise NoiseCeilingError(f"{what}; a rank correlation needs at least 3")
-    return chosen
-
-
-def _what_trains(config: str) -> tuple[PhysicsParams, EnvConfig, LearnerConfig,
-                                      GeneratorParams, Limits] | None:
-    """The typed groups of a resolved config that decide a training's result (physics,
-    env, learner, robot generation and limits), defaults filled in; None if it does not
-    parse. Other groups (the GA's, recording) leave the numbers as they are."""
-    from evo.edge import generator_of, limits_of, training_parts
-
-    try:
-        cfg = OmegaConf.create(config)
-        assert isinstance(cfg, DictConfig)
-        parts = training_parts(cfg)
-        return parts.physics, parts.env, parts.learner, generator_of(cfg), limits_of(cfg)
-    except Exception:  # noqa: BLE001 - any unreadable config differs from a readable one
-        return None
-
-
-def _check_settings(out: Path, settings: Settings) -> None:
-    """Refuse an output folder that holds a noise ceiling of other settings."""
-    path = out / SETTINGS
-    if not path.is_file():
-        return
-    try:
-        stored = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise NoiseCeilingError(f"{path}: unreadable ({err})") from None
-    mine = settings.to_json()
-    differ = [k for k in Settings.COMPARED if k != "config"
-              and json.dumps(stored.get(k)) != json.dumps(mine[k])]
-    if _what_trains(str(stored.get("config"))) != _what_trains(settings.config):
-        differ.append("config")
-    if differ:
-        raise NoiseCeilingError(
-            f"--out {out}: holds a noise ceiling with other settings ({', '.join(differ)} "
-            "differ); give the same arguments to continue it, or another --out")
-
-
-def open_folder(out: Path, settings: Settings) -> None:
-    """Create ``out`` or continue it: refuse a folder that is not one or that holds a
-    noise ceiling of other settings, then store ``settings.json``."""
-    if out.exists() and not out.is_dir():
-        raise NoiseCeilingError(f"--out {out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    _check_settings(out, settings)
-    (out / SETTINGS).write_text(json.dumps(settings.to_json(), indent=2) + "\n")
-
-
-def read_trainings(out: Path) -> pd.DataFrame:
-    """``trainings.csv`` of a noise-ceiling folder (empty when it has none yet); a
-    column that an older folder lacks (``cpu_seconds``) reads as missing values."""
-    path = out / TRAININGS
-    if not path.is_file():
-        return pd.DataFrame(columns=list(TRAINING_COLUMNS))
-    table = pd.read_csv(path)
-    return table.reindex(columns=[*table.columns, *(c for c in TRAINING_COLUMNS
-                                                    if c not in table.columns)])
-
-
-def _jobs(out: Path, parts: TrainingParts, settings: Settings) -> dict[str, Job]:
-    """The evaluation job of each role: ``seed`` (the learner) and ``baseline`` (the
-    random learner: the same network, never updated)."""
-    from evo.evaluation import Job
-
-    learner = parts.learner
-    random_learner = dataclasses.replace(learner, update=False, name="random")
-    return {role: Job(parts.physics, parts.env, config, str(out), config.name,
-                      record=parts.record, config_yaml=settings.config)
-            for role, config in (("seed", learner), ("baseline", random_learner))}
-
-
-def _training_row(out: Path, training: Training, learner: str, settings: Settings,
-                  outcome: Outcome) -> TrainingRow:
-    """The ``trainings.csv`` row of one finished training."""
-    from evo.run.layout import RunLayout
-
-    curve = read_curve(RunLayout(out).curve(training.name))
-    return TrainingRow(
-        name=training.name, structure=training.structure, role=training.role, learner=learner,
-        replicate=training.replicate, seed=training.seed, budget=settings.budget,
-        fitness=outcome.fitness, fitness_late=late_fitness(curve, settings.budget),
-        episodes=outcome.episodes, env_steps=outcome.env_steps,
-        wall_seconds=outcome.wall_seconds, cpu_seconds=outcome.cpu_seconds)
-
-
-def run_trainings(out: Path, cfg: DictConfig, settings: Settings, robots: Sequence[Robot],
-                  log: Callable[[str], None] = print) -> pd.DataFrame:
-    """Train every planned training not yet in ``trainings.csv``, through the config's
-    executor, appending each result as it arrives (and the wall time so far, over every
-    session, to ``progress.json``).
-
-    Returns:
-        The whole trainings table. Failed trainings are reported through ``log`` and
-        left out, so the next call tries them again.
-    """
-    from evo.edge import executor_of, training_parts, warn_if_failures_cannot_end
-    from evo.evaluation import Candidate, evaluate, outcome_of
-    from evo.run.files import write_csv
-    from evo.run.store import RunStore
-
-    parts = training_parts(cfg)
-    warn_if_failures_cannot_end(settings.budget, "--budget", parts.learner, parts.env)
-    jobs = _jobs(out, parts, settings)
-    by_name = {r.name: r for r in robots}
-    store = RunStore(out)
-    store.prepare()
-    for robot in robots:
-        store.save_robot(robot.name, robot)
-    rows: list[TrainingRow] = read_trainings(out).to_dict("records")
-    done = {row["name"] for row in rows}
-    plan = plan_trainings(settings.structures, seeds=settings.seeds, root=settings.root_seed,
-                          baseline=settings.baseline and parts.learner.update)
-    todo = [t for t in plan if t.name not in done]
-    log(f"{len(plan) - len(todo)} of {len(plan)} trainings already done; {len(todo)} to run")
-    wall_before, start = wall_seconds(out), time.perf_counter()
-    executor = executor_of(cfg)
-    running: dict[Future[Outcome], tuple[Training, Candidate]] = {}
-    try:
-        while todo or running:
-            while todo and len(running) < executor.workers:
-                training = todo.pop(0)
-                candidate = Candidate(len(rows) + len(running), training.name,
-                            by_name[training.structure].canonical_json(), settings.budget,
-                            training.seed, (), "noise-ceiling")
-                running[executor.submit(evaluate, candidate, jobs[training.role])] = (
-                    training, candidate)
-            for future in wait(running, return_when=FIRST_COMPLETED).done:
-                training, candidate = running.pop(future)
-                outcome = outcome_of(future, candidate, executor)
-                if outcome.error is not None:
-                    log(f"{training.name}: failed ({outcome.error.strip().splitlines()[-1]})")
-                    continue
-                rows.append(_training_row(out, training, jobs[training.role].learner.name,
-                                          settings, outcome))
-                write_csv(out / TRAININGS, pd.DataFrame(rows, columns=list(TRAINING_COLUMNS)))
-                _write_progress(out, wall_before + time.perf_counter() - start)
-                log(f"{len(rows)}/{len(plan)} {training.name}: fitness {outcome.fitness:+.3f} "
-                    f"({outcome.env_steps:,} env steps, {outcome.wall_seconds:.0f} s)")
-    except BaseException:  # a signal or an error: stop the trainings now, not at their end
-        executor.terminate()
-        raise
-    finally:
-        _write_progress(out, wall_before + time.perf_counter() - start)
-    executor.shutdown()
-    return pd.DataFrame(rows, columns=list(TRAINING_COLUMNS))
-
-
-def wall_seconds(out: Path) -> float:
-    """Wall seconds spent training into ``out`` so far, over every session."""
-    path = out / PROGRESS
-    return float(json.loads(path.read_text())["wall_seconds"]) if path.is_file() else 0.0
-
-
-def _write_progress(out: Path, seconds: float) -> None:
-    from evo.run.files import write_json
-
-    write_json(out / PROGRESS, {"wall_seconds": seconds})
-
-
 # ---------------------------------------------------------------- report
 
 
@@ -566,10 +268,11 @@ def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
     from analysis.plots import plot_seed_scatter
 
     table = ceiling_table(trainings, resampling or Resampling.seeded(0))
-    table.to_csv(out / "noise_ceiling.csv", index=False)
+    layout = RetrainLayout(out)
+    table.to_csv(layout.metrics, index=False)
     seeds, base = _by_role(trainings)
     plot_seed_scatter(seeds, base, estimators=list(ESTIMATORS), ceiling=table,
-                      margin=CLEAR_MARGIN, path=out / "noise_ceiling.png")
+                      margin=CLEAR_MARGIN, path=layout.figure)
     steps = int(trainings["env_steps"].sum())
     summary = Summary(
         settings=settings.to_json() | {"config": None}, command=command,
@@ -579,8 +282,8 @@ def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
         metrics={row["estimator"]: {k: v for k, v in row.items() if k != "estimator"}
                  for row in table.to_dict("records")},
     )
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    report = out / REPORT
+    layout.summary.write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    report = layout.report
     report.write_text(_markdown(table, trainings, settings, summary), encoding="utf-8")
     return report
 
@@ -624,11 +327,69 @@ def _markdown(table: pd.DataFrame, trainings: pd.DataFrame, settings: Settings,
 # ---------------------------------------------------------------- CLI
 
 
+def run(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
+        overrides: Sequence[str], command: str,
+        on_ready: Callable[[], None] | None = None) -> Path:
+    """The noise ceiling of ``config``'s structures under ``cfg``: their trainings
+    (``evo.retrain``, resumed in ``out``), then the report.
+
+    Args:
+        cfg: The composed config (its learner, env, physics, executor, ...).
+        out: The run directory.
+        config: The ``noise_ceiling`` settings.
+        root_seed: Seed of the random robots and root of the training seeds.
+        overrides: The config overrides, as ``settings.json`` and the report name them.
+        command: The command, as ``summary.json`` and the report name it.
+        on_ready: Called once the settings and the folder are checked, before anything
+            trains (the run directory's ``RunLock.claim``).
+
+    Returns:
+        The report, ``noise_ceiling.md``.
+
+    Raises:
+        NoiseCeilingError: For a bad setting or folder.
+        TooFewTrainings: When fewer than 3 structures have two finished trainings (run
+            it again to retry the failed ones).
+        evo.config.ConfigError: For a config that cannot train (its key named).
+    """
+    from evo.edge import executor_of
+    from evo.pool import EvaluationPool
+    from evo.retrain import retraining, run_trainings
+
+    retrain = retraining(cfg, out, config, root_seed=root_seed, overrides=overrides)
+    if on_ready is not None:
+        on_ready()
+    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
+    replicates = _by_role(trainings)[0].groupby("structure").size()
+    if (replicates >= 2).sum() < 3:
+        raise TooFewTrainings(f"{out}: fewer than 3 structures have two finished "
+                              "trainings; run the same command again")
+    return write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
+                        command=command,
+                        resampling=Resampling.seeded(0, config.resamples))
+
+
+# ---------------------------------------------------------------- the older command line
+
+FLAGS = {"noise_ceiling.robots": "--robots", "noise_ceiling.random": "--random",
+         "noise_ceiling.seeds": "--seeds", "noise_ceiling.budget": "--budget",
+         "noise_ceiling.resamples": "--resamples", "hydra.run.dir": "--out"}
+"""The command line's name of each key that a message may name."""
+
+
+def _as_flags(message: str) -> str:
+    """``message`` with the keys of :data:`FLAGS` named as the command line names them."""
+    for key, flag in FLAGS.items():
+        message = message.replace(key, flag)
+    return message
+
+
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     cli = argparse.ArgumentParser(
         prog="python -m analysis.noise_ceiling",
         description="Train structures under independent seeds and measure how well one "
-                    "seed's fitness ranks them as another's does.")
+                    "seed's fitness ranks them as another's does (the retrain task of "
+                    "evo/main.py: python evo/main.py +exp=retrain ...).")
     source = cli.add_mutually_exclusive_group(required=True)
     source.add_argument("--robots", type=Path, help="folder of evo.robot/1 files")
     source.add_argument("--random", type=int, metavar="N", help="N random robots")
@@ -647,38 +408,45 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return cli.parse_args(argv)
 
 
+def _config_of(args: argparse.Namespace) -> RetrainConfig:
+    """The ``noise_ceiling`` settings the arguments give (checked)."""
+    from evo.config import typed
+
+    return typed(RetrainConfig, {
+        "robots": None if args.robots is None else str(args.robots), "random": args.random,
+        "seeds": args.seeds, "budget": args.budget, "baseline": not args.no_baseline,
+        "resamples": args.resamples}, "noise_ceiling")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the tool; exit 0, or 2 with one line naming a bad argument or config key."""
+    """Run the retrain task under the older command line, in ``--out`` (its lock held,
+    SIGINT and SIGTERM stopping the trainings at once); exit 0, 2 with one line naming
+    a bad argument or config key or a folder in use, 1 when too few trainings finished,
+    130 or 143 when stopped."""
     from evo.config import ConfigError
-    from evo.edge import compose_config, training_parts
+    from evo.edge import compose_config
+    from evo.interrupt import Interrupted, handle_signals
+    from evo.run.files import RunDirectoryBusy, RunLock
 
     args = parse_args(argv)
     command = "python -m analysis.noise_ceiling " + shlex.join(
         sys.argv[1:] if argv is None else list(argv))
     try:
-        if args.seeds < 2:
-            raise NoiseCeilingError(f"--seeds: expected at least 2, got {args.seeds}")
+        config = _config_of(args)
         cfg = compose_config(args.overrides)
-        learner = training_parts(cfg).learner
-        budget = learner.total_steps if args.budget is None else args.budget
-        if budget < 1:
-            raise NoiseCeilingError(f"--budget: expected a positive env-step count, got {budget}")
-        robots = load_structures(args.robots, args.random, args.seed, cfg)
-        settings = Settings.of(cfg, args.overrides, budget=budget, seeds=args.seeds,
-                               root_seed=args.seed, baseline=not args.no_baseline,
-                               robots=robots)
-        open_folder(args.out, settings)
-        trainings = run_trainings(args.out, cfg, settings, robots)
-    except (NoiseCeilingError, ConfigError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    replicates = _by_role(trainings)[0].groupby("structure").size()
-    if (replicates >= 2).sum() < 3:
-        print(f"error: {args.out}: fewer than 3 structures have two finished trainings; "
-              "run the same command again", file=sys.stderr)
-        return 1
-    report = write_report(args.out, trainings, settings, wall_seconds=wall_seconds(args.out),
-                          command=command, resampling=Resampling.seeded(0, args.resamples))
+        if args.out.exists() and not args.out.is_dir():
+            raise NoiseCeilingError(f"hydra.run.dir {args.out}: exists and is not a folder")
+        args.out.mkdir(parents=True, exist_ok=True)
+        with handle_signals(), RunLock(args.out) as lock:
+            report = run(cfg, args.out, config, root_seed=args.seed, overrides=args.overrides,
+                         command=command, on_ready=lock.claim)
+    except (NoiseCeilingError, ConfigError, RunDirectoryBusy) as err:
+        print(f"error: {_as_flags(str(err))}", file=sys.stderr)
+        return 1 if isinstance(err, TooFewTrainings) else 2
+    except Interrupted as stop:
+        print(f"interrupted; {args.out} is incomplete: run the same command again to "
+              "continue it", file=sys.stderr)
+        return stop.exit_code
     print(f"report: {report}")
     return 0
 

@@ -5,8 +5,9 @@ lower cost (SPEC §10).
     python evo/main.py +exp=noise_sweep                       # the study of conf/exp
     python evo/main.py +exp=noise_sweep hydra.sweeper.n_trials=3
 
-One trial (``task=noise_sweep``) is :mod:`analysis.noise_ceiling` run on the trial's
-config: the same fixed sample of random robots (``noise_sweep.robots``, drawn with
+One trial (``task=noise_sweep``) is the noise ceiling (``evo.retrain``'s trainings,
+:mod:`analysis.noise_ceiling`'s report) run on the trial's config: the same fixed
+sample of random robots (``noise_sweep.robots``, drawn with
 ``noise_sweep.robot_seed``), each trained ``noise_sweep.seeds`` times at
 ``noise_sweep.budget`` env steps, without the random-learner baseline. It returns two
 objectives to Optuna: the seed-to-seed agreement ``noise_sweep.objective`` of Eq. 8
@@ -137,26 +138,28 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     """
     import pandas as pd
 
-    from analysis import noise_ceiling as nc
     from analysis.bootstrap import Resampling
+    from analysis.noise_ceiling import write_report
     from evo.config import ConfigError, typed
+    from evo.edge import executor_of
+    from evo.pool import EvaluationPool
+    from evo.retrain import RetrainConfig, RetrainError, retraining, run_trainings, wall_seconds
 
     sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
+    config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
+                           baseline=False, resamples=sweep.resamples)
     try:
-        robots = nc.load_structures(None, sweep.robots, sweep.robot_seed, cfg)
-        settings = nc.Settings.of(cfg, overrides, budget=sweep.budget, seeds=sweep.seeds,
-                                  root_seed=sweep.robot_seed, baseline=False, robots=robots)
-        nc.open_folder(out, settings)
-    except nc.NoiseCeilingError as err:
+        retrain = retraining(cfg, out, config, root_seed=sweep.robot_seed, overrides=overrides)
+    except RetrainError as err:
         raise ConfigError(f"noise_sweep: {err}") from None
-    trainings = nc.run_trainings(out, cfg, settings, robots)
+    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
     finished = trainings.groupby("structure").size()
     if (finished >= sweep.seeds).sum() < 3:
         raise SweepError(f"{out}: fewer than 3 robots have all {sweep.seeds} trainings "
                          "finished; the trial failed")
     command = "python evo/main.py " + " ".join(overrides)
-    nc.write_report(out, trainings, settings, wall_seconds=nc.wall_seconds(out),
-                    command=command, resampling=Resampling.seeded(0, sweep.resamples))
+    write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
+                 command=command, resampling=Resampling.seeded(0, sweep.resamples))
     summary = json.loads((out / "summary.json").read_text())
     metrics = summary["metrics"]["fitness"]
     result = TrialResult(

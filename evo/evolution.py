@@ -25,8 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -34,8 +33,9 @@ import numpy as np
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, Member, Offspring, StructureStrategy
 from evo.components.inheritance import PolicyStart, policy_start
-from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
+from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.interrupt import critical
+from evo.pool import EvaluationPool
 from evo.record import RecordConfig
 from evo.record.run import Birth, RunRecorder
 from evo.robot.builder import PhysicsParams, build
@@ -93,39 +93,35 @@ class Evolution:
         self.store.prepare()
         if not self.store.has_state():
             self._save()  # a new run has a state from its first moment
-        running: dict[Future[Outcome], Candidate] = {}
-        try:
-            for candidate in self.pending:  # in flight when a previous session stopped
-                running[self.executor.submit(self.evaluate, candidate, self.job)] = candidate
-            while True:
-                while len(running) < self.executor.workers and self._can_submit(running):
-                    with critical():
-                        candidate = self._next_candidate(running)
-                        self.pending.append(candidate)
-                        self._save()
-                    running[self.executor.submit(self.evaluate, candidate, self.job)] = candidate
-                if not running:
-                    break
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in done:
-                    candidate = running.pop(future)
-                    with critical():
-                        self._record(candidate, outcome_of(future, candidate, self.executor))
-        except BaseException:
-            self.executor.terminate()
-            raise
-        self.executor.shutdown()
+        pool = EvaluationPool(self.executor, self.evaluate)
+        pool.run(self._submission, self._finished,
+                 resumed=[(candidate, self.job) for candidate in self.pending])
         return self.summary()
 
-    def _can_submit(self, running: dict[Future[Outcome], Candidate]) -> bool:
+    def _submission(self, running: Sequence[Candidate]) -> tuple[Candidate, Job] | None:
+        """The next robot to evaluate, saved as in flight before it is submitted; None
+        when the budget or the population's fill allows none now."""
+        if not self._can_submit(running):
+            return None
+        with critical():
+            candidate = self._next_candidate(running)
+            self.pending.append(candidate)
+            self._save()
+        return candidate, self.job
+
+    def _finished(self, candidate: Candidate, outcome: Outcome) -> None:
+        with critical():
+            self._record(candidate, outcome)
+
+    def _can_submit(self, running: Sequence[Candidate]) -> bool:
         if self.next_birth >= self.ga.robot_budget:
             return False
         if len(self.population) >= self.ga.population_size:
             return True
-        initial_running = sum(1 for t in running.values() if not t.parents)
+        initial_running = sum(1 for t in running if not t.parents)
         return len(self.population) + initial_running < self.ga.population_size
 
-    def _next_candidate(self, running: dict[Future[Outcome], Candidate]) -> Candidate:
+    def _next_candidate(self, running: Sequence[Candidate]) -> Candidate:
         """Breed (or draw) the next robot and give it a unique name, budget and seed."""
         birth = self.next_birth
         if len(self.population) < self.ga.population_size:

@@ -11,6 +11,8 @@ Tasks (``task=``):
 * ``robots``: generate, save and picture random robots;
 * ``train``: train one robot (``robot=FILE``) and evaluate it deterministically;
 * ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``);
+* ``retrain``: train fixed structures under independent seeds and report their noise
+  ceiling (``+exp=retrain``, ``evo.retrain``); ``resume=<run dir>`` continues it;
 * ``noise_sweep``: one trial of the noise-ceiling sweep (``+exp=noise_sweep``); it
   returns the trial's objectives to Hydra's Optuna sweeper.
 """
@@ -285,12 +287,36 @@ def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, f
     return run_trial(cfg, out, trial_overrides()).values()
 
 
+def run_retrain(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+    """Train fixed structures under independent seeds and write their noise ceiling
+    (``+exp=retrain``, ``analysis.noise_ceiling``); ``resume=DIR`` continues, reusing
+    the finished trainings (so does the same command run again)."""
+    from analysis.noise_ceiling import NoiseCeilingError, run
+    from evo.retrain import RetrainConfig, stored_settings
+
+    resuming = cfg.resume is not None
+    if resuming:
+        cfg = _resumed_config(Path(str(cfg.resume)))
+    config = typed(RetrainConfig, cfg.get("noise_ceiling"), "noise_ceiling")
+    try:
+        stored = stored_settings(out) if resuming else None
+        overrides = (tuple(stored["overrides"]) if stored is not None
+                     else trial_overrides())
+        report = run(cfg, out, config, root_seed=check_seed(cfg), overrides=overrides,
+                     command="python evo/main.py " + " ".join(overrides),
+                     on_ready=lock.claim if resuming else None)
+    except NoiseCeilingError as err:
+        raise ConfigError(str(err)) from None
+    print(f"report: {report}")
+
+
 TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
     "evolve": run_evolve,
     "robots": run_robots,
     "train": run_train,
     "evaluate": run_evaluate,
     "noise_sweep": run_noise_sweep,
+    "retrain": run_retrain,
 }
 
 
@@ -312,7 +338,7 @@ def main(cfg: DictConfig) -> object:
     logging.raiseExceptions = False
     try:
         with handle_signals(), lock:
-            task = TASKS.get(str(cfg.task))
+            task = TASKS.get(_task_name(cfg))
             if task is None:
                 raise ConfigError(
                     f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
@@ -345,9 +371,18 @@ def main(cfg: DictConfig) -> object:
         sys.exit(code)
 
 
+def _task_name(cfg: DictConfig) -> str:
+    """The task to run: ``task``, or with ``resume=DIR`` the task DIR was started with."""
+    if cfg.resume is None:
+        return str(cfg.task)
+    path = RunLayout(Path(str(cfg.resume))).config
+    stored = OmegaConf.load(path) if path.is_file() else None
+    return str(stored.get("task", "evolve")) if isinstance(stored, DictConfig) else "evolve"
+
+
 def _how_to_continue(cfg: DictConfig, out: Path, first: str = "") -> str:
     """How a stopped run goes on: its resume command, or that its directory is incomplete."""
-    if str(cfg.task) == "evolve":
+    if _task_name(cfg) in ("evolve", "retrain"):
         return f"{first}continue with: python evo/main.py resume={out}"
     return f"{out} is incomplete"
 

@@ -15,6 +15,15 @@ An evolution run directory (``task=evolve``)::
     evals/<name>.mcap/.rrd its recordings
     evals/<name>.log       the traceback of its evaluation, when an exception ended it
 
+A retraining of fixed structures (``+exp=retrain``, the noise ceiling: ``evo.retrain``)
+keeps ``config.yaml``, ``lock.json``, ``summary.json``, ``robots/`` and ``evals/`` and
+writes, instead of the state and history::
+
+    settings.json          what decides its numbers (``evo.retrain.Settings``)
+    trainings.csv          one row per finished training (``evo.retrain.TrainingRow``)
+    progress.json          the wall time spent training, over every session
+    noise_ceiling.md/.csv/.png  the report, its metrics and its figure
+
 A one-robot training (``+exp=train``) writes ``robot.json``, ``policy.pt``, ``curve.csv``
 and ``summary.json`` (``evo.run.records.TrainSummary``) instead. Code outside
 ``evo/run/`` asks a :class:`RunLayout` or a :class:`TrainLayout` for a path; it never
@@ -42,6 +51,12 @@ CURVE_SUFFIX = ".csv"
 MCAP_SUFFIX = ".mcap"
 RRD_SUFFIX = ".rrd"
 ERROR_LOG_SUFFIX = ".log"
+TRAININGS = "trainings.csv"
+RETRAIN_SETTINGS = "settings.json"
+PROGRESS = "progress.json"
+CEILING_REPORT = "noise_ceiling.md"
+CEILING_METRICS = "noise_ceiling.csv"
+CEILING_FIGURE = "noise_ceiling.png"
 TRAIN_ROBOT = "robot.json"
 TRAIN_POLICY = "policy.pt"
 TRAIN_CURVE = "curve.csv"
@@ -154,6 +169,41 @@ class RunLayout:
         found = {p for p in (folder / SUMMARY, *folder.rglob(SUMMARY))
                  if p.is_file() and p.parent.name != EVALS}
         return sorted(found)
+
+
+@dataclass(frozen=True)
+class RetrainLayout(RunLayout):
+    """The paths of a retraining's directory (``+exp=retrain``; see the module docstring)."""
+
+    @property
+    def settings(self) -> Path:
+        """``settings.json``: what decides the noise ceiling's numbers."""
+        return self.root / RETRAIN_SETTINGS
+
+    @property
+    def trainings(self) -> Path:
+        """``trainings.csv``: one row per finished training."""
+        return self.root / TRAININGS
+
+    @property
+    def progress(self) -> Path:
+        """``progress.json``: the wall time spent training so far."""
+        return self.root / PROGRESS
+
+    @property
+    def report(self) -> Path:
+        """``noise_ceiling.md``: the report."""
+        return self.root / CEILING_REPORT
+
+    @property
+    def metrics(self) -> Path:
+        """``noise_ceiling.csv``: the noise ceiling of every fitness estimator."""
+        return self.root / CEILING_METRICS
+
+    @property
+    def figure(self) -> Path:
+        """``noise_ceiling.png``: fitness under one seed against another."""
+        return self.root / CEILING_FIGURE
 
 
 @dataclass(frozen=True)
