@@ -92,6 +92,10 @@ EXCLUDED: dict[str, str] = {
         "submits Slurm jobs: needs a cluster and the submitit plugin",
     "python evo/main.py +exp=ablation hydra/launcher=ray hydra.launcher.ray.init.address=auto":
         "needs a running Ray cluster and the Ray launcher plugin",
+    "python evo/main.py +exp=retrain noise_ceiling.random=24 noise_ceiling.budget=100000 "
+    "hydra.run.dir=noise/ record=off": "48 trainings of 100k env steps (an hour); test_retrain "
+                                       "runs the task end to end on three robots, resumed, "
+                                       "and against the alias below",
     "python -m analysis.noise_ceiling --random 24 --seed 0 --seeds 2 --budget 100000 --out "
     "noise/ record=off": "cannot be shrunk as typed: its report needs episodes that end (a "
                          "budget of 32 arenas x T_max = 32k env steps per training, 6 trainings "
