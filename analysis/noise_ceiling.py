@@ -352,9 +352,9 @@ def run(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
             it again to retry the failed ones).
         evo.config.ConfigError: For a config that cannot train (its key named).
     """
-    from evo.edge import executor_of
+    from evo.edge import executor_of, retraining
     from evo.pool import EvaluationPool
-    from evo.retrain import retraining, run_trainings
+    from evo.retrain import run_trainings
 
     retrain = retraining(cfg, out, config, root_seed=root_seed, overrides=overrides)
     if on_ready is not None:

@@ -141,9 +141,9 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     from analysis.bootstrap import Resampling
     from analysis.noise_ceiling import write_report
     from evo.config import ConfigError, typed
-    from evo.edge import executor_of
+    from evo.edge import executor_of, retraining
     from evo.pool import EvaluationPool
-    from evo.retrain import RetrainConfig, RetrainError, retraining, run_trainings, wall_seconds
+    from evo.retrain import RetrainConfig, RetrainError, run_trainings, wall_seconds
 
     sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
     config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,

@@ -4,17 +4,21 @@
 robots the way a run does (``python -m analysis.noise_ceiling``, the benchmarks)
 composes the same ``conf/`` tree with the same overrides through :func:`compose_config`.
 Either way, the typed parts every training needs come from one place here, so a key
-is checked, and named in errors, the same way everywhere (STYLE rule 1).
+is checked, and named in errors, the same way everywhere (STYLE rule 1); so do the
+noise ceiling's trainings (:func:`retraining`, for ``task=retrain``, its alias and the
+noise sweep's trials).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from evo.components.executors import EvalExecutor
 from evo.config import ConfigError, instantiate, typed
@@ -23,6 +27,9 @@ from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
 from evo.robot import GeneratorParams, Limits
 from evo.robot.builder import PhysicsParams
+
+if TYPE_CHECKING:
+    from evo.retrain import RetrainConfig, Retraining
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 """The Hydra config tree (``conf/`` at the repository root)."""
@@ -121,6 +128,62 @@ def warn_if_failures_cannot_end(
         )
 
 
+def settings_config(cfg: DictConfig) -> str:
+    """``cfg`` resolved, without the executor group (which decides where trainings run,
+    not their numbers): a noise ceiling's ``evo.retrain.Settings.config``."""
+    kept = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(kept, dict)
+    kept.pop("executor", None)
+    return OmegaConf.to_yaml(OmegaConf.create(kept))
+
+
+def what_trains(config: str) -> tuple[object, ...] | None:
+    """The typed groups of a resolved config (YAML) that decide a training's result
+    (physics, env, learner, robot generation and limits), defaults filled in; None if it
+    does not parse. Other groups (the GA's, recording) leave the numbers as they are."""
+    try:
+        cfg = OmegaConf.create(config)
+        assert isinstance(cfg, DictConfig)
+        parts = training_parts(cfg)
+        return parts.physics, parts.env, parts.learner, generator_of(cfg), limits_of(cfg)
+    except Exception:  # noqa: BLE001 - any unreadable config differs from a readable one
+        return None
+
+
+def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
+               overrides: Sequence[str]) -> Retraining:
+    """The noise ceiling's trainings of ``config`` under ``cfg`` (``evo.retrain``):
+    settings and folder checked, ``settings.json`` stored (the folder is created if
+    needed); nothing is trained yet.
+
+    Raises:
+        evo.retrain.RetrainError: For bad robots or a folder of other settings (named).
+        ConfigError: For a config that cannot train (its key named).
+    """
+    from evo.evaluation import Job
+    from evo.retrain import RetrainError, Retraining, Settings, load_structures, open_folder
+
+    parts = training_parts(cfg)
+    budget = parts.learner.total_steps if config.budget is None else config.budget
+    if budget < 1:
+        raise RetrainError(f"noise_ceiling.budget: expected a positive env-step count, "
+                           f"got {budget}")
+    robots = load_structures(None if config.robots is None else Path(config.robots),
+                             config.random, root_seed, generator=generator_of(cfg),
+                             limits=limits_of(cfg))
+    settings = Settings(tuple(overrides), budget, config.seeds, root_seed, config.baseline,
+                        tuple(r.name for r in robots), settings_config(cfg))
+    open_folder(out, settings, what_trains)
+    warn_if_failures_cannot_end(budget, "noise_ceiling.budget", parts.learner, parts.env)
+    # The random learner: the same network, never updated.
+    random_learner = dataclasses.replace(parts.learner, update=False, name="random")
+    jobs = {role: Job(parts.physics, parts.env, learner, str(out), learner.name,
+                      record=parts.record, config_yaml=settings.config)
+            for role, learner in (("seed", parts.learner), ("baseline", random_learner))}
+    return Retraining(out, settings, tuple(robots), jobs,
+                      config.baseline and parts.learner.update)
+
+
 __all__ = [
     "CONF_DIR",
     "ConfigError",
@@ -131,6 +194,9 @@ __all__ = [
     "generator_of",
     "limits_of",
     "physics_of",
+    "retraining",
+    "settings_config",
     "training_parts",
     "warn_if_failures_cannot_end",
+    "what_trains",
 ]

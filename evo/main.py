@@ -338,7 +338,7 @@ def main(cfg: DictConfig) -> object:
     logging.raiseExceptions = False
     try:
         with handle_signals(), lock:
-            task = TASKS.get(_task_name(cfg))
+            task = TASKS.get(_resumable_task(cfg))
             if task is None:
                 raise ConfigError(
                     f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
@@ -380,9 +380,22 @@ def _task_name(cfg: DictConfig) -> str:
     return str(stored.get("task", "evolve")) if isinstance(stored, DictConfig) else "evolve"
 
 
+RESUMABLE = ("evolve", "retrain")
+"""The tasks ``resume=DIR`` continues."""
+
+
+def _resumable_task(cfg: DictConfig) -> str:
+    """:func:`_task_name`, refusing ``resume=`` of a task that does not resume."""
+    name = _task_name(cfg)
+    if cfg.resume is not None and name not in RESUMABLE:
+        raise ConfigError(f"resume: {cfg.resume} holds a task={name} run, which does not "
+                          f"resume (only {' and '.join(RESUMABLE)} do); run its command again")
+    return name
+
+
 def _how_to_continue(cfg: DictConfig, out: Path, first: str = "") -> str:
     """How a stopped run goes on: its resume command, or that its directory is incomplete."""
-    if _task_name(cfg) in ("evolve", "retrain"):
+    if _task_name(cfg) in RESUMABLE:
         return f"{first}continue with: python evo/main.py resume={out}"
     return f"{out} is incomplete"
 

@@ -29,7 +29,6 @@ from typing import Any, TypedDict
 
 import numpy as np
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
 
 from evo.evaluation import Candidate, Job, Outcome
 from evo.pool import EvaluationPool
@@ -192,30 +191,6 @@ class Settings:
     executor, as long as the resolved config without it is the same)."""
 
 
-def settings_config(cfg: DictConfig) -> str:
-    """:attr:`Settings.config` of ``cfg``: resolved, without the executor group (which
-    decides where the trainings run, not their numbers)."""
-    kept = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(kept, dict)
-    kept.pop("executor", None)
-    return OmegaConf.to_yaml(OmegaConf.create(kept))
-
-
-def _what_trains(config: str) -> tuple[object, ...] | None:
-    """The typed groups of a resolved config that decide a training's result (physics,
-    env, learner, robot generation and limits), defaults filled in; None if it does not
-    parse. Other groups (the GA's, recording) leave the numbers as they are."""
-    from evo.edge import generator_of, limits_of, training_parts
-
-    try:
-        cfg = OmegaConf.create(config)
-        assert isinstance(cfg, DictConfig)
-        parts = training_parts(cfg)
-        return parts.physics, parts.env, parts.learner, generator_of(cfg), limits_of(cfg)
-    except Exception:  # noqa: BLE001 - any unreadable config differs from a readable one
-        return None
-
-
 def stored_settings(out: Path) -> dict[str, Any] | None:
     """``settings.json`` of the folder ``out`` as stored, or None when it has none.
 
@@ -233,7 +208,12 @@ def stored_settings(out: Path) -> dict[str, Any] | None:
     return stored
 
 
-def _check_settings(out: Path, settings: Settings) -> None:
+WhatTrains = Callable[[str], object]
+"""The typed groups of a resolved config (:attr:`Settings.config`) that decide a
+training's result (``evo.edge.what_trains``): two configs alike there train alike."""
+
+
+def _check_settings(out: Path, settings: Settings, what_trains: WhatTrains) -> None:
     """Refuse an output folder that holds a noise ceiling of other settings."""
     stored = stored_settings(out)
     if stored is None:
@@ -241,7 +221,7 @@ def _check_settings(out: Path, settings: Settings) -> None:
     mine = settings.to_json()
     differ = [k for k in Settings.COMPARED if k != "config"
               and json.dumps(stored.get(k)) != json.dumps(mine[k])]
-    if _what_trains(str(stored.get("config"))) != _what_trains(settings.config):
+    if what_trains(str(stored.get("config"))) != what_trains(settings.config):
         differ.append("config")
     if differ:
         raise RetrainError(
@@ -250,13 +230,14 @@ def _check_settings(out: Path, settings: Settings) -> None:
             "another output folder")
 
 
-def open_folder(out: Path, settings: Settings) -> None:
+def open_folder(out: Path, settings: Settings, what_trains: WhatTrains) -> None:
     """Create ``out`` or continue it: refuse a folder that is not one or that holds a
-    noise ceiling of other settings, then store ``settings.json``."""
+    noise ceiling of other settings (``config`` compared by ``what_trains``), then store
+    ``settings.json``."""
     if out.exists() and not out.is_dir():
         raise RetrainError(f"hydra.run.dir {out}: exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
-    _check_settings(out, settings)
+    _check_settings(out, settings, what_trains)
     RetrainLayout(out).settings.write_text(json.dumps(settings.to_json(), indent=2) + "\n")
 
 
@@ -341,37 +322,6 @@ class Retraining:
         s = self.settings
         return plan_trainings(s.structures, seeds=s.seeds, root=s.root_seed,
                               baseline=self.baseline)
-
-
-def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
-               overrides: Sequence[str]) -> Retraining:
-    """Check the settings and the folder and store ``settings.json`` (the folder is
-    created if needed); nothing is trained yet.
-
-    Raises:
-        RetrainError: For bad robots or a folder of other settings (named).
-        evo.config.ConfigError: For a config that cannot train (its key named).
-    """
-    from evo.edge import generator_of, limits_of, training_parts, warn_if_failures_cannot_end
-
-    parts = training_parts(cfg)
-    budget = parts.learner.total_steps if config.budget is None else config.budget
-    if budget < 1:
-        raise RetrainError(f"noise_ceiling.budget: expected a positive env-step count, "
-                           f"got {budget}")
-    robots = load_structures(None if config.robots is None else Path(config.robots),
-                             config.random, root_seed, generator=generator_of(cfg),
-                             limits=limits_of(cfg))
-    settings = Settings(tuple(overrides), budget, config.seeds, root_seed, config.baseline,
-                        tuple(r.name for r in robots), settings_config(cfg))
-    open_folder(out, settings)
-    warn_if_failures_cannot_end(budget, "noise_ceiling.budget", parts.learner, parts.env)
-    random_learner = dataclasses.replace(parts.learner, update=False, name="random")
-    jobs = {role: Job(parts.physics, parts.env, learner, str(out), learner.name,
-                      record=parts.record, config_yaml=settings.config)
-            for role, learner in (("seed", parts.learner), ("baseline", random_learner))}
-    return Retraining(out, settings, tuple(robots), jobs,
-                      config.baseline and parts.learner.update)
 
 
 def _training_row(out: Path, training: Training, learner: str, budget: int,

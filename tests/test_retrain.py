@@ -243,6 +243,19 @@ def test_a_bad_retrain_setting_names_its_key(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+def test_resume_continues_the_task_a_directory_was_started_with(tmp_path: Path) -> None:
+    from evo.config import ConfigError
+    from evo.edge import compose_config
+    from evo.main import _resumable_task
+
+    cfg = compose_config([f"resume={tmp_path}"])
+    (tmp_path / "config.yaml").write_text("task: retrain\n")
+    assert _resumable_task(cfg) == "retrain"
+    (tmp_path / "config.yaml").write_text("task: noise_sweep\n")
+    with pytest.raises(ConfigError, match="task=noise_sweep run, which does not resume"):
+        _resumable_task(cfg)
+
+
 @pytest.mark.long  # a signal mid-task; the resume test above covers what it continues
 def test_a_signal_stops_the_retrain_task_and_resume_continues_it(tmp_path: Path) -> None:
     out = tmp_path / "ceiling"
