@@ -51,7 +51,7 @@ from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
 from evo.record import read_curve
-from evo.run.layout import HISTORY, RunLayout
+from evo.run.layout import HISTORY, TRAININGS, RunLayout
 from evo.run.records import RunSummary, read_run_summary, read_train_summary
 from evo.run.records import read_history as read_history_file
 
@@ -486,7 +486,7 @@ def _retrained_in(path: Path) -> tuple[list[RetrainedRow], bool]:
     """The :func:`load_retrained` rows of everything under ``path``, and whether it
     holds any noise-ceiling folder, evolution run or training run."""
     rows: list[RetrainedRow] = []
-    tables = sorted({p for p in (path / "trainings.csv", *path.rglob("trainings.csv"))
+    tables = sorted({p for p in (path / TRAININGS, *path.rglob(TRAININGS))
                      if p.is_file()})
     found = bool(tables)
     for table_path in tables:

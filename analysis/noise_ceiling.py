@@ -63,20 +63,9 @@ from analysis.bootstrap import Resampling, Statistic, bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
-from evo.retrain import (
-    TRAINING_COLUMNS,
-    RetrainConfig,
-    RetrainError,
-    Settings,
-    Training,
-    TrainingRow,
-    late_fitness,
-    plan_trainings,
-    read_trainings,
-    training_seed,
-    wall_seconds,
-)
-from evo.run.layout import CEILING_REPORT, PROGRESS, RETRAIN_SETTINGS, TRAININGS, RetrainLayout
+from evo.retrain import RetrainConfig, RetrainError, Settings, wall_seconds
+from evo.run import layout as files
+from evo.run.layout import RetrainLayout
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
@@ -92,8 +81,8 @@ CLEAR_MARGIN = 0.01
 """Fitness by which a structure must beat the random learner to count as learning: a
 hundredth of the time penalty's range, well above the float noise of a robot that
 cannot move (its fitness is −1 to about 1e-6)."""
-REPORT = CEILING_REPORT
-SETTINGS = RETRAIN_SETTINGS
+REPORT, SETTINGS, TRAININGS = files.CEILING_REPORT, files.RETRAIN_SETTINGS, files.TRAININGS
+"""The report's, the settings' and the trainings' file names (``evo.run.layout``)."""
 NoiseCeilingError = RetrainError
 """A bad argument or output folder; the message names it."""
 
@@ -101,10 +90,6 @@ NoiseCeilingError = RetrainError
 class TooFewTrainings(RetrainError):
     """Fewer than 3 structures have two finished trainings: no rank correlation yet."""
 
-__all__ = ["PROGRESS", "TRAININGS", "TRAINING_COLUMNS", "RetrainConfig", "Settings",
-           "Training", "TrainingRow", "late_fitness", "plan_trainings", "read_trainings",
-           "training_seed"]
-"""What the trainings' module (``evo.retrain``) owns, named here as before."""
 
 
 class Summary(TypedDict):

@@ -14,6 +14,7 @@ import pytest
 from analysis import noise_ceiling as nc
 from analysis.bootstrap import Resampling
 from analysis.noise_study import main as study_main
+from evo.retrain import late_fitness, plan_trainings
 from evo.robot import load_robot, parse_robot, save_robot
 
 REPO = Path(__file__).resolve().parents[1]
@@ -65,14 +66,14 @@ def test_top_quarter_and_baseline_shares_on_a_small_case() -> None:
 def test_late_fitness_weights_the_episodes_of_the_second_half() -> None:
     curve = pd.DataFrame({"env_steps": [100, 200, 300, 400], "train/episodes": [5, 0, 1, 3],
                           "train/mean_return": [-1.0, np.nan, 0.5, 1.0]})
-    assert nc.late_fitness(curve, budget=400) == pytest.approx((0.5 + 3 * 1.0) / 4)
-    assert np.isnan(nc.late_fitness(curve.iloc[:2], budget=400))
+    assert late_fitness(curve, budget=400) == pytest.approx((0.5 + 3 * 1.0) / 4)
+    assert np.isnan(late_fitness(curve.iloc[:2], budget=400))
 
 
 def test_training_seeds_depend_on_the_structure_and_replicate_only() -> None:
-    plan = nc.plan_trainings(["robot-0000000a", "robot-0000000b"], seeds=2, root=3,
+    plan = plan_trainings(["robot-0000000a", "robot-0000000b"], seeds=2, root=3,
                              baseline=True)
-    reordered = nc.plan_trainings(["robot-0000000b", "robot-0000000a"], seeds=3, root=3,
+    reordered = plan_trainings(["robot-0000000b", "robot-0000000a"], seeds=3, root=3,
                                   baseline=False)
     seeds = {t.name: t.seed for t in plan}
     assert all(seeds[t.name] == t.seed for t in reordered if t.name in seeds)
