@@ -50,6 +50,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
+from evo.config import STRUCTURE_LETTERS
 from evo.record import read_curve
 from evo.run.layout import HISTORY, RunLayout
 from evo.run.records import RunSummary, read_run_summary, read_train_summary
@@ -266,7 +267,11 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> 
     if summary is not None:
         return summary.method
     ga, learner = config.get("ga", {}), config.get("learner", {})
-    return f"{ga.get('structure', 'E')}+{'L' if learner.get('update', True) else 'R'}"
+    structure = ga.get("structure", "E")
+    if isinstance(structure, dict):  # today's form names its class (older: the letter)
+        letters = {target: letter for letter, target in STRUCTURE_LETTERS.items()}
+        structure = letters.get(str(structure.get("_target_")), "?")
+    return f"{structure}+{'L' if learner.get('update', True) else 'R'}"
 
 
 def _summary(run_dir: Path) -> RunSummary | None:

@@ -33,7 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, typed
+from evo.config import ConfigError, current, typed
 from evo.edge import (
     executor_of,
     generator_of,
@@ -142,6 +142,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
+    cfg = current(cfg)
     parts = training_parts(cfg)
     learner = parts.learner
     ga = typed(GAConfig, cfg.ga, "ga")
@@ -242,7 +243,8 @@ def check_seed(cfg: DictConfig) -> int:
 
 
 def _resumed_config(run_dir: Path) -> DictConfig:
-    """The resolved config a run directory was started with."""
+    """The resolved config a run directory was started with, in today's form
+    (:func:`evo.config.current`: a run of an older evo resumes)."""
     path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
@@ -255,7 +257,7 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     loaded = OmegaConf.load(path)
     assert isinstance(loaded, DictConfig)
     loaded.resume = None
-    return loaded
+    return current(loaded)
 
 
 def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> None:
@@ -322,6 +324,7 @@ def main(cfg: DictConfig) -> object:
             torch.set_num_threads(threads)
             if cfg.resume is None:
                 check_seed(cfg)
+                cfg = current(cfg)  # config.yaml holds today's form (ga.structure=R too)
                 _write_config(cfg, out, lock)
             return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None
     except ConfigError as err:
