@@ -115,11 +115,23 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
 
 
 def _built(cls: type[T], node: DictConfig | Mapping[str, Any], key: str) -> T:
-    """The object ``node`` names with ``_target_``: ``cls`` or a subclass of it."""
-    built = instantiate(node, key)
-    if not isinstance(built, cls):
+    """The object ``node`` names with ``_target_``: ``cls`` or a subclass of it, its
+    fields from the node's other keys."""
+    from hydra.utils import get_class
+
+    target = node.get("_target_")
+    if not isinstance(target, str):
+        raise ConfigError(f"{key}: expected a mapping with a _target_ class")
+    try:
+        named = get_class(target)
+    except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
+        raise ConfigError(f"{key}._target_: no class {target!r}") from None
+    if not issubclass(named, cls):
         raise ConfigError(f"{key}._target_: expected a {cls.__name__} (or a subclass), "
-                          f"got {type(built).__name__}")
+                          f"got {named.__name__}")
+    plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
+    assert isinstance(plain, Mapping)
+    built: T = typed(named, {str(k): v for k, v in plain.items() if k != "_target_"}, key)
     return built
 
 
@@ -129,19 +141,9 @@ def instantiate(node: DictConfig | Mapping[str, Any], key: str) -> Any:
     The class comes from ``_target_`` (a dataclass); the other keys are its fields, so
     mistakes are reported as for ``typed``, naming ``key.field``.
     """
-    from hydra.utils import get_class
-
-    target = node.get("_target_") if isinstance(node, DictConfig | Mapping) else None
-    if not isinstance(target, str):
+    if not isinstance(node, DictConfig | Mapping):
         raise ConfigError(f"{key}: expected a mapping with a _target_ class")
-    try:
-        cls = get_class(target)
-    except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
-        raise ConfigError(f"{key}._target_: no class {target!r}") from None
-    plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
-    assert isinstance(plain, Mapping)
-    fields = {str(k): v for k, v in plain.items() if k != "_target_"}
-    return typed(cls, fields, key)
+    return _built(object, node, key)
 
 
 STRUCTURE_LETTERS: dict[str, str] = {
