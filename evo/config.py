@@ -165,13 +165,15 @@ def current(cfg: DictConfig) -> DictConfig:
 
     * ``ga.structure`` given as a letter of :data:`STRUCTURE_LETTERS` becomes
       ``{_target_: <its class>}``;
+    * ``ga.mutation_operators`` given by name (a key of
+      :data:`evo.robot.operators.MUTATIONS`) become ``{_target_: <its class>}``;
     * a ``learner`` without ``_target_`` (``name: ppo|random`` and ``update``) becomes
       the class :data:`OLD_LEARNERS` names, with its other keys, ``update`` included.
 
     A config in today's form comes back as it was (a copy; ``cfg`` is left alone).
 
     Raises:
-        ConfigError: For a letter or learner name that stands for nothing.
+        ConfigError: For a letter or name that stands for nothing.
     """
     out = copy.deepcopy(cfg)
     with open_dict(out):
@@ -182,6 +184,9 @@ def current(cfg: DictConfig) -> DictConfig:
                 raise ConfigError(f"ga.structure: expected E (evolve) or R (random), got "
                                   f"{letter!r}")
             ga.structure = {"_target_": STRUCTURE_LETTERS[letter]}
+        if isinstance(ga, DictConfig) and isinstance(ga.get("mutation_operators"), ListConfig):
+            ga.mutation_operators = [_mutation(op, f"ga.mutation_operators[{i}]")
+                                     for i, op in enumerate(ga.mutation_operators)]
         learner = out.get("learner")
         if isinstance(learner, DictConfig) and "_target_" not in learner:
             name = learner.pop("name", "ppo")
@@ -190,3 +195,17 @@ def current(cfg: DictConfig) -> DictConfig:
                                   f"{', '.join(OLD_LEARNERS)}")
             learner._target_ = OLD_LEARNERS[name]
     return out
+
+
+def _mutation(op: Any, key: str) -> Any:
+    """A mutation operator of ``ga.mutation_operators``: a name becomes the node of its
+    class; a node is left as it is."""
+    from evo.robot.operators import MUTATIONS
+
+    if not isinstance(op, str):
+        return op
+    if op not in MUTATIONS:
+        raise ConfigError(f"{key}: unknown mutation operator {op!r}; expected one of "
+                          f"{', '.join(MUTATIONS)}")
+    cls = type(MUTATIONS[op])
+    return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}

@@ -44,6 +44,7 @@ from evo.main import (
     _write_config,
     evolve_parts,
 )
+from evo.robot.operators import RotateEdge
 
 REPO = Path(__file__).resolve().parents[1]
 CONF = REPO / "conf"
@@ -292,12 +293,14 @@ def test_an_older_config_yaml_gives_todays_typed_config(hydra_conf: None, tmp_pa
     assert again.ga == today.ga and again.job.learner == today.job.learner
 
 
-def test_the_structure_letters_stand_for_their_strategies(hydra_conf: None, tmp_path: Path) -> None:
+def test_the_shorthands_stand_for_their_classes(hydra_conf: None, tmp_path: Path) -> None:
     for letter, group, strategy in (("E", "evolve", Evolve), ("R", "random", RandomStructures)):
         by_letter = build(compose("config", overrides=[f"ga.structure={letter}"]), tmp_path)
         by_group = build(compose("config", overrides=[f"ga/structure={group}"]), tmp_path)
         assert type(by_letter.strategy) is type(by_group.strategy) is strategy
         assert by_letter.ga == by_group.ga and by_letter.job.method == f"{letter}+L"
+    named = build(compose("config", overrides=["ga.mutation_operators=[rotate_edge]"]), tmp_path)
+    assert named.ga.mutation_operators == (RotateEdge(),)
     old = OmegaConf.load(OLD_CONFIG)
     old.learner.name = "teleport"
     with pytest.raises(ConfigError, match="learner.name: unknown learner 'teleport'"):
@@ -322,7 +325,10 @@ BAD_VALUES = [
     ("learner._target_=evo.components.ga.Roulette",
      "learner._target_: expected a LearnerConfig (or a subclass), got Roulette"),
     ("ga.mutation_rate=2", "ga: mutation_rate must be in [0, 1]"),
-    ("ga.mutation_operators=[teleport]", "ga: unknown mutation operators ['teleport']"),
+    ("ga.mutation_operators=[rotate_edge,teleport]",
+     "ga.mutation_operators[1]: unknown mutation operator 'teleport'"),
+    ("ga.mutation_operators=[{_target_:evo.components.ga.Roulette}]",
+     "ga.mutation_operators[0]._target_: expected a Mutation (or a subclass), got Roulette"),
     ("ga.crossover_tries=many", "ga.crossover_tries: expected an integer, got 'many'"),
     ("ga.eval_timeout_s=-1", "ga: eval_timeout_s must be >= 0 (0 = none), got -1"),
     ("ga.eval_timeout_s=soon", "ga.eval_timeout_s: expected a number, got 'soon'"),

@@ -33,6 +33,7 @@ from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
     GeneratorParams,
+    Mutation,
     OperatorError,
     Origins,
     crossover,
@@ -290,7 +291,8 @@ class GAConfig:
         crossover_tries: Swaps tried per parent pair before a new pair is drawn (``E``).
         parent_tries: Parent pairs tried before breeding gives up (``E``).
         mutation_rate: Probability an offspring is also mutated (``E``; 0 in the paper).
-        mutation_operators: Which mutation operators may be used (``E``).
+        mutation_operators: The mutation operators an offspring may get, one drawn
+            at random (``E``).
         eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
         early_rejection: When an offspring's training may stop early.
         inheritance: Whether an offspring's policy starts from a parent's, a key of
@@ -306,7 +308,7 @@ class GAConfig:
     crossover_tries: int = 100
     parent_tries: int = 20
     mutation_rate: float = 0.0
-    mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
+    mutation_operators: tuple[Mutation, ...] = tuple(MUTATIONS.values())
     eval_timeout_s: float = 0.0
     early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
     inheritance: str = "off"
@@ -325,10 +327,6 @@ class GAConfig:
         if self.inheritance not in INHERITANCE_MODES:
             raise ValueError(f"inheritance: expected one of {', '.join(INHERITANCE_MODES)}, "
                              f"got {self.inheritance!r}")
-        unknown = set(self.mutation_operators) - set(MUTATIONS)
-        if unknown:
-            raise ValueError(f"unknown mutation operators {sorted(unknown)}; expected some of "
-                             f"{sorted(MUTATIONS)}")
 
     def strategy(self, generator: GeneratorParams | None = None,
                  limits: Limits | None = None) -> StructureStrategy:
