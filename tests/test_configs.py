@@ -17,6 +17,7 @@ import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import HydraException
@@ -305,6 +306,19 @@ def test_the_shorthands_stand_for_their_classes(hydra_conf: None, tmp_path: Path
     old.learner.name = "teleport"
     with pytest.raises(ConfigError, match="learner.name: unknown learner 'teleport'"):
         current(old)
+
+
+def test_a_runs_method_comes_from_either_form_of_its_config(
+    hydra_conf: None, tmp_path: Path
+) -> None:
+    from analysis.load import run_method
+
+    today = OmegaConf.to_container(current(compose(
+        "config", overrides=["ga/structure=random", "learner=random"])), resolve=True)
+    old = {"ga": {"structure": "R"}, "learner": {"name": "random", "update": False}}
+    for config in (today, old):  # a run directory without history or summary
+        assert isinstance(config, dict)
+        assert run_method(tmp_path, pd.DataFrame(), config) == "R+R", config
 
 
 # ---- bad values stop the run at start ---------------------------------------------------------
