@@ -6,11 +6,12 @@ dataclass rejects) into a ``ConfigError`` that names the full key, so a bad valu
 at start with a message a user can act on.
 
 Every swappable part (learner, structure strategy, selection, replacement, schedule,
-executor) is chosen one way: its node names a dataclass with ``_target_`` and its
-other keys are that class's fields. ``typed`` builds such a node wherever it meets one,
-as the class the field (or the caller) expects or a subclass of it. ``current`` turns
-the forms older evo wrote into a run directory's ``config.yaml`` (and the letters
-``ga.structure=E|R`` the command line keeps) into today's.
+mutation operators, executor) is chosen one way: its node names a frozen dataclass with
+``_target_`` and its other keys are that class's fields. ``typed`` builds such a node
+wherever it meets one, as the class the field (or the caller) expects or a subclass of
+it. ``current`` turns the forms older evo wrote into a run directory's ``config.yaml``
+into today's, and keeps them as shorthands of the command line (``ga.structure=E|R``,
+mutation operators by name).
 """
 
 from __future__ import annotations
@@ -161,7 +162,8 @@ OLD_LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo.PPO", "random": "evo.le
 
 def current(cfg: DictConfig) -> DictConfig:
     """``cfg`` in today's form: a run directory's ``config.yaml`` written by an older evo
-    resumes, and the shorthand ``ga.structure=E|R`` keeps working.
+    resumes, and the shorthands ``ga.structure=E|R`` and
+    ``ga.mutation_operators=[<name>, ...]`` keep working.
 
     * ``ga.structure`` given as a letter of :data:`STRUCTURE_LETTERS` becomes
       ``{_target_: <its class>}``;
