@@ -50,7 +50,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
-from evo.config import STRUCTURE_LETTERS
+from evo.config import structure_letter
 from evo.record import read_curve
 from evo.run.layout import HISTORY, RunLayout
 from evo.run.records import RunSummary, read_run_summary, read_train_summary
@@ -267,10 +267,7 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> 
     if summary is not None:
         return summary.method
     ga, learner = config.get("ga", {}), config.get("learner", {})
-    structure = ga.get("structure", "E")
-    if isinstance(structure, dict):  # today's form names its class (older: the letter)
-        letters = {target: letter for letter, target in STRUCTURE_LETTERS.items()}
-        structure = letters.get(str(structure.get("_target_")), "?")
+    structure = structure_letter(ga.get("structure", "E"))
     return f"{structure}+{'L' if learner.get('update', True) else 'R'}"
 
 

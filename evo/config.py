@@ -155,6 +155,15 @@ STRUCTURE_LETTERS: dict[str, str] = {
 ``ga.structure=R`` on the command line, the ablation's sweep, an older ``config.yaml``)
 and the class each stands for."""
 
+def structure_letter(structure: Any) -> str:
+    """The letter of a ``ga.structure`` value in either form (a letter, or a node whose
+    ``_target_`` is a class of :data:`STRUCTURE_LETTERS`; ``?`` for another class)."""
+    if isinstance(structure, DictConfig | Mapping):
+        letters = {target: letter for letter, target in STRUCTURE_LETTERS.items()}
+        return letters.get(str(structure.get("_target_")), "?")
+    return str(structure)
+
+
 OLD_LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo.PPO", "random": "evo.learners.ppo.PPO"}
 """The ``learner.name`` of an older ``config.yaml`` and the class it stands for (its
 ``update`` key, kept, says whether the policy learns)."""

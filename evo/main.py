@@ -33,7 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, current, typed
+from evo.config import ConfigError, current, structure_letter, typed
 from evo.edge import (
     executor_of,
     generator_of,
@@ -121,9 +121,11 @@ def method_label(structure: str, learns: bool) -> str:
     return f"{structure}+{'L' if learns else 'R'}"
 
 
-# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir.
+# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir;
+# ga.structure a letter (ga.structure=E,R) or its node (ga/structure=evolve,random).
 if not OmegaConf.has_resolver("evo_method"):
-    OmegaConf.register_new_resolver("evo_method", method_label)
+    OmegaConf.register_new_resolver(
+        "evo_method", lambda structure, learns: method_label(structure_letter(structure), learns))
 
 
 @dataclass(frozen=True)

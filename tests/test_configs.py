@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import HydraException
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
 from evo.components.ga import (
@@ -300,6 +300,13 @@ def test_the_shorthands_stand_for_their_classes(hydra_conf: None, tmp_path: Path
         by_group = build(compose("config", overrides=[f"ga/structure={group}"]), tmp_path)
         assert type(by_letter.strategy) is type(by_group.strategy) is strategy
         assert by_letter.ga == by_group.ga and by_letter.job.method == f"{letter}+L"
+    default = compose("config")
+    assert current(default) == default, "today's form comes back as it was"
+    for letter, override in ("E", "ga/structure=evolve"), ("R", "ga.structure=R"):
+        cfg = compose("config", overrides=[override])
+        with open_dict(cfg):
+            cfg.subdir = "${evo_method:${ga.structure},${learner.update}}"
+        assert cfg.subdir == f"{letter}+L", "the resolver reads either form"
     named = build(compose("config", overrides=["ga.mutation_operators=[rotate_edge]"]), tmp_path)
     assert named.ga.mutation_operators == (RotateEdge(),)
     old = OmegaConf.load(OLD_CONFIG)
