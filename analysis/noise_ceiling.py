@@ -462,7 +462,7 @@ def _jobs(out: Path, parts: TrainingParts, settings: Settings) -> dict[str, Job]
     from evo.evaluation import Job
 
     learner = parts.learner
-    random_learner = dataclasses.replace(learner, update=False, name="random")
+    random_learner = dataclasses.replace(learner, update=False)  # named "random"
     return {role: Job(parts.physics, parts.env, config, str(out), config.name,
                       record=parts.record, config_yaml=settings.config)
             for role, config in (("seed", learner), ("baseline", random_learner))}

@@ -17,7 +17,7 @@ from pathlib import Path
 from omegaconf import DictConfig
 
 from evo.components.executors import EvalExecutor
-from evo.config import ConfigError, instantiate, typed
+from evo.config import ConfigError, current, instantiate, typed
 from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
@@ -81,6 +81,7 @@ def training_parts(cfg: DictConfig) -> TrainingParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
+    cfg = current(cfg)
     return TrainingParts(
         physics=physics_of(cfg),
         env=env_of(cfg),

@@ -7,7 +7,7 @@ its error in one line (an unexpected exception's traceback goes to
 fails for want of room is not the robot's failure: it raises
 ``evo.run.files.WriteFailed``, the run stops, and the robot, still in flight, is
 evaluated again on resume. The learner is the one the job's
-learner config names (``evo.learners.get_learner``) unless the caller passes another.
+learner config names (its ``train_function``) unless the caller passes another.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
 from evo.interrupt import critical, raised
-from evo.learners import Learner, get_learner
+from evo.learners import Learner
 from evo.learners.common import Inheritance, LearnerConfig, load_checkpoint, save_checkpoint
 from evo.learners.rollouts import play
 from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
@@ -207,7 +207,7 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
     start, cpu_start = time.perf_counter(), time.process_time()
     try:
         robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
-        train = get_learner(job.learner) if learner is None else learner
+        train = job.learner.train_function() if learner is None else learner
         outcome = _train_and_record(robot, candidate, job, train, start)
     except Exception as err:  # noqa: BLE001 - any failure is recorded and the run goes on
         if (stop := raised()) is not None:  # a signal, turned into another error on its way

@@ -33,7 +33,7 @@ from omegaconf import DictConfig, OmegaConf
 from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, typed
+from evo.config import ConfigError, current, structure_letter, typed
 from evo.edge import (
     executor_of,
     generator_of,
@@ -121,9 +121,11 @@ def method_label(structure: str, learns: bool) -> str:
     return f"{structure}+{'L' if learns else 'R'}"
 
 
-# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir.
+# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir;
+# ga.structure a letter (ga.structure=E,R) or its node (ga/structure=evolve,random).
 if not OmegaConf.has_resolver("evo_method"):
-    OmegaConf.register_new_resolver("evo_method", method_label)
+    OmegaConf.register_new_resolver(
+        "evo_method", lambda structure, learns: method_label(structure_letter(structure), learns))
 
 
 @dataclass(frozen=True)
@@ -142,6 +144,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
+    cfg = current(cfg)
     parts = training_parts(cfg)
     learner = parts.learner
     ga = typed(GAConfig, cfg.ga, "ga")
@@ -242,7 +245,8 @@ def check_seed(cfg: DictConfig) -> int:
 
 
 def _resumed_config(run_dir: Path) -> DictConfig:
-    """The resolved config a run directory was started with."""
+    """The resolved config a run directory was started with, in today's form
+    (:func:`evo.config.current`: a run of an older evo resumes)."""
     path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
@@ -255,7 +259,7 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     loaded = OmegaConf.load(path)
     assert isinstance(loaded, DictConfig)
     loaded.resume = None
-    return loaded
+    return current(loaded)
 
 
 def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> None:
@@ -322,6 +326,7 @@ def main(cfg: DictConfig) -> object:
             torch.set_num_threads(threads)
             if cfg.resume is None:
                 check_seed(cfg)
+                cfg = current(cfg)  # config.yaml holds today's form (ga.structure=R too)
                 _write_config(cfg, out, lock)
             return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None
     except ConfigError as err:

@@ -210,10 +210,9 @@ def test_a_signal_that_cleanup_turns_into_another_error_is_not_a_failed_robot(
 
     from evo.evaluation import Job, evaluate
     from evo.interrupt import Interrupted, handle_signals
-    from evo.learners import get_learner
     from evo.robot.builder import PhysicsParams
 
-    ppo = get_learner(TINY_LEARNER)
+    ppo = TINY_LEARNER.train_function()
 
     def converting(robot: Robot, **kwargs: Any) -> Any:
         """The real learner, whose curve callback is unwound by such a library ``finally``."""
