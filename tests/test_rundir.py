@@ -483,8 +483,9 @@ def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
 
 
 # ---- a full disk ---------------------------------------------------------------------------
-# tests/full_disk.py runs evo/main.py and lowers the process's real file-size limit
-# (RLIMIT_FSIZE) just before one write of the kind under test, which then fails in the
+# tests/full_disk.py runs evo/main.py, with a store and an evaluation that watch evo's own
+# writes, and lowers the process's real file-size limit (RLIMIT_FSIZE) just before one
+# write of the kind under test, which then fails in the
 # kernel (EFBIG) as on a full disk. One run directory goes through a session per kind,
 # each a resume of the one before: each records its rows, then meets the full disk; the
 # last resume, with room again, must give the uninterrupted run's history.
@@ -507,8 +508,7 @@ SDK_LOG = ("re_log_encoding::", "re_sdk::")
 
 
 def full_disk_cmd(kind: str, after: int, *args: str) -> list[str]:
-    return [sys.executable, str(REPO / "tests" / "full_disk.py"), kind, str(after),
-            str(REPO / "evo" / "main.py"), *args]
+    return [sys.executable, str(REPO / "tests" / "full_disk.py"), kind, str(after), *args]
 
 
 def evo_lines(stderr: str) -> list[str]:
