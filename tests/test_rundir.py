@@ -447,8 +447,7 @@ ORPHAN = """
 import os, signal, subprocess, sys, time
 if sys.argv[1] == "worker":
     import evo.interrupt
-    evo.interrupt.ORPHAN_GRACE_S = 1.0
-    evo.interrupt.worker_init(os.getppid())
+    evo.interrupt.worker_init(os.getppid(), grace_s=1.0)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a cleanup that no signal reaches
     print("ready", flush=True)
     time.sleep(120)
