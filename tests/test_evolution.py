@@ -432,9 +432,7 @@ def run(cmd: list[str], cwd: Path, timeout: float = 240) -> subprocess.Completed
 
 
 def killed(point: str, k: int, *args: str, cwd: Path) -> None:
-    done = run(
-        [sys.executable, "-c", DRIVER, str(REPO / "evo" / "main.py"), point, str(k), *args], cwd
-    )
+    done = run([sys.executable, str(DRIVER), point, str(k), *args], cwd)
     assert done.returncode == -signal.SIGKILL, (point, k, done.returncode, done.stderr[-2000:])
 
 

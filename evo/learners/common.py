@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import pandas as pd
 import torch
@@ -418,6 +418,18 @@ def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig, *,
     data = io.BytesIO()  # torch reports a failed write without its cause: written here
     torch.save(state, data)
     return write_bytes(path, data.getvalue())
+
+
+class SavePolicy(Protocol):
+    """Writes a trained policy (:func:`save_checkpoint` is evo's own).
+
+    ``evo.evaluation.evaluate`` takes one beside its learner: a writer that also
+    exports the policy in another form is one of this signature. What it writes at
+    ``path`` is what :func:`load_checkpoint` reads (a child's inherited policy, a replay).
+    """
+
+    def __call__(self, policy: Policy, path: Path, config: LearnerConfig, *,
+                 robot: str = "") -> Path: ...
 
 
 def load_checkpoint(path: Path, *, robot: Robot | None = None,
