@@ -50,6 +50,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
+from evo.config import structure_letter
 from evo.record import read_curve
 from evo.run.layout import HISTORY, TRAININGS, RunLayout
 from evo.run.records import RunSummary, read_run_summary, read_train_summary
@@ -266,7 +267,8 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> 
     if summary is not None:
         return summary.method
     ga, learner = config.get("ga", {}), config.get("learner", {})
-    return f"{ga.get('structure', 'E')}+{'L' if learner.get('update', True) else 'R'}"
+    structure = structure_letter(ga.get("structure", "E"))
+    return f"{structure}+{'L' if learner.get('update', True) else 'R'}"
 
 
 def _summary(run_dir: Path) -> RunSummary | None:

@@ -43,99 +43,9 @@ RUN = [
 """A small serial evolution, recorded: 7 robots of 1-2k env steps each."""
 KINDS = ("evaluation", "state-write", "recording", "between", "time")
 
-# Runs evo/main.py in this process after arranging a SIGKILL at the k-th event of a kind:
-# state-write (state.json half written), between (a state saved with nothing in flight),
-# evaluation (the k-th learning-curve batch), recording (an episode or a birth written,
-# not flushed), checkpoint (before the k-th policy is saved: training has ended) or
-# after-final-state (just after the state with k robots and nothing in flight is saved).
-# tests/test_evolution.py drives its SIGKILL tests with it too.
-DRIVER = r"""
-import json, os, runpy, signal, sys
-import evo.evaluation as evaluation
-import evo.record.run as run_record
-import evo.run.files as run_files
-
-main_file, kind, k, argv = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4:]
-calls = 0
-
-
-def hit():
-    global calls
-    calls += 1
-    return calls == k
-
-
-def die():
-    os.kill(os.getpid(), signal.SIGKILL)
-
-
-real_write, real_open, real_birth = (run_files.write_json, evaluation.open_recorder,
-                                     run_record.RunRecorder.birth)
-real_save = evaluation.save_checkpoint
-
-
-def write_json(path, data):
-    if path.name == "state.json" and kind == "state-write" and hit():
-        text = json.dumps(data)
-        path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
-        die()
-    real_write(path, data)
-    if path.name == "state.json" and kind == "between" and not data["pending"] and hit():
-        die()
-    if path.name == "state.json" and kind == "after-final-state":
-        if not data["pending"] and len(data["history"]) == k:
-            die()
-    return path
-
-
-def save_checkpoint(*args, **kwargs):
-    if kind == "checkpoint" and hit():
-        die()
-    return real_save(*args, **kwargs)
-
-
-class Dying:
-    def __init__(self, inner):
-        self.inner = inner
-
-    def __getattr__(self, name):
-        return getattr(self.inner, name)
-
-    def __enter__(self):
-        self.inner.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        return self.inner.__exit__(*exc)
-
-    def curve(self, row):
-        self.inner.curve(row)
-        if kind == "evaluation" and hit():
-            die()
-
-    def episode(self, episode):
-        if kind == "recording" and hit():
-            self.inner.episode(episode)  # written, not yet flushed or closed
-            die()
-        self.inner.episode(episode)
-
-
-def open_recorder(*args, **kwargs):
-    return Dying(real_open(*args, **kwargs))
-
-
-def birth(self, b):
-    real_birth(self, b)
-    if kind == "recording" and hit():
-        die()
-
-
-run_files.write_json, evaluation.open_recorder = write_json, open_recorder
-evaluation.save_checkpoint = save_checkpoint
-run_record.RunRecorder.birth = birth
-sys.argv = [main_file, *argv]
-runpy.run_path(main_file, run_name="__main__")
-"""
+DRIVER = Path(__file__).with_name("kill_at.py")
+"""Runs evo/main.py killed at the k-th event of a kind (``python bench/kill_at.py KIND K
+...``); tests/test_evolution.py drives its SIGKILL tests with it too."""
 
 
 @dataclass(frozen=True)
@@ -174,9 +84,8 @@ def attempt(args: list[str], kind: str, k: int, delay: float, cwd: Path) -> bool
                 proc.kill()
                 proc.wait()
             return proc.returncode == -signal.SIGKILL
-    done = subprocess.run([sys.executable, "-c", DRIVER, str(REPO / "evo" / "main.py"), kind,
-                           str(k), *args], cwd=cwd, env=env(), capture_output=True, text=True,
-                          timeout=600)
+    done = subprocess.run([sys.executable, str(DRIVER), kind, str(k), *args], cwd=cwd,
+                          env=env(), capture_output=True, text=True, timeout=600)
     if done.returncode not in (0, -signal.SIGKILL):
         raise RuntimeError(f"{kind} kill: the run failed (exit {done.returncode}):\n"
                            f"{done.stderr[-3000:]}")

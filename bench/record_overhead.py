@@ -22,7 +22,7 @@ from rich.table import Table
 
 from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, evaluate
-from evo.learners.common import LearnerConfig
+from evo.learners.ppo import PPO
 from evo.record import RecordConfig
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -41,7 +41,7 @@ def main() -> None:
     rates: dict[str, float] = {"on": 0.0, "off": 0.0}
     sizes: dict[str, int] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        base = Job(PhysicsParams(), EnvConfig(nthread=args.nthread), LearnerConfig(), tmp)
+        base = Job(PhysicsParams(), EnvConfig(nthread=args.nthread), PPO(), tmp)
         jobs = {"on": dataclasses.replace(base, record=RecordConfig()),
                 "off": dataclasses.replace(base, record=RecordConfig(mcap=False, rerun=False))}
         for _ in range(args.repeats):

@@ -36,7 +36,7 @@ from rich.table import Table
 from evo.components.executors import EvalExecutor, LocalExecutor, RayExecutor, SerialExecutor
 from evo.envs.params import EnvConfig, TaskParams
 from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
-from evo.learners.common import LearnerConfig
+from evo.learners.ppo import PPO
 from evo.record import RecordConfig
 from evo.robot import random_robot
 from evo.robot.builder import PhysicsParams
@@ -154,7 +154,7 @@ class Settings:
 
     def job(self, run_dir: str) -> Job:
         """The tiny evaluation: 2 arenas x 64 steps per batch, 50-step episodes."""
-        learner = LearnerConfig(num_envs=2, rollout_steps=64, epochs=1, minibatch_size=64,
+        learner = PPO(num_envs=2, rollout_steps=64, epochs=1, minibatch_size=64,
                                 hidden=(32, 32), eval_episodes=0)
         record = RecordConfig() if self.record else RecordConfig(mcap=False, rerun=False)
         return Job(PhysicsParams(), EnvConfig(task=TaskParams(t_max=50)), learner, run_dir,

@@ -4,16 +4,25 @@ Below ``evo/main.py`` nothing sees a ``DictConfig``. ``typed`` builds one datacl
 one config node and turns every mistake (an unknown key, a wrong type, a value a
 dataclass rejects) into a ``ConfigError`` that names the full key, so a bad value fails
 at start with a message a user can act on.
+
+Every swappable part (learner, structure strategy, selection, replacement, schedule,
+mutation operators, executor) is chosen one way: its node names a frozen dataclass with
+``_target_`` and its other keys are that class's fields. ``typed`` builds such a node
+wherever it meets one, as the class the field (or the caller) expects or a subclass of
+it. ``current`` turns the forms older evo wrote into a run directory's ``config.yaml``
+into today's, and keeps them as shorthands of the command line (``ga.structure=E|R``,
+mutation operators by name).
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import typing
 from collections.abc import Mapping
 from typing import Any, TypeVar
 
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 T = TypeVar("T")
 
@@ -29,12 +38,6 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
         if isinstance(value, hint):
             return value
-        if isinstance(value, Mapping) and "_target_" in value:
-            built = instantiate(value, key)
-            if not isinstance(built, hint):
-                raise ConfigError(f"{key}._target_: expected a {hint.__name__} (or a "
-                                  f"subclass), got {type(built).__name__}")
-            return built
         return typed(hint, value, key)
     origin = typing.get_origin(hint)
     if origin is tuple:
@@ -70,6 +73,9 @@ def _coerce(value: Any, hint: Any, key: str) -> Any:
 def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -> T:
     """Build dataclass ``cls`` from the config ``node`` found at ``key``.
 
+    A node with ``_target_`` is built as the class it names (:func:`instantiate`),
+    which must be ``cls`` or a subclass; so is every nested one.
+
     Args:
         cls: A dataclass whose fields all have defaults or appear in ``node``.
         node: The config mapping (``None`` means all defaults).
@@ -82,6 +88,8 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
         ConfigError: naming ``key.field`` for an unknown key, a wrong type, or a value
             that the dataclass's own checks reject.
     """
+    if isinstance(node, DictConfig | Mapping) and "_target_" in node:
+        return _built(cls, node, key)
     raw: dict[str, Any] = {}
     if node is not None:
         plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
@@ -107,22 +115,108 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
         raise ConfigError(f"{key}.{err}" if name in fields else f"{key}: {err}") from None
 
 
+def _built(cls: type[T], node: DictConfig | Mapping[str, Any], key: str) -> T:
+    """The object ``node`` names with ``_target_``: ``cls`` or a subclass of it, its
+    fields from the node's other keys."""
+    from hydra.utils import get_class
+
+    target = node.get("_target_")
+    if not isinstance(target, str):
+        raise ConfigError(f"{key}: expected a mapping with a _target_ class")
+    try:
+        named = get_class(target)
+    except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
+        raise ConfigError(f"{key}._target_: no class {target!r}") from None
+    if not issubclass(named, cls):
+        raise ConfigError(f"{key}._target_: expected a {cls.__name__} (or a subclass), "
+                          f"got {named.__name__}")
+    plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
+    assert isinstance(plain, Mapping)
+    built: T = typed(named, {str(k): v for k, v in plain.items() if k != "_target_"}, key)
+    return built
+
+
 def instantiate(node: DictConfig | Mapping[str, Any], key: str) -> Any:
     """The object a config node with ``_target_`` describes, built through ``typed``.
 
     The class comes from ``_target_`` (a dataclass); the other keys are its fields, so
     mistakes are reported as for ``typed``, naming ``key.field``.
     """
-    from hydra.utils import get_class
-
-    target = node.get("_target_") if isinstance(node, DictConfig | Mapping) else None
-    if not isinstance(target, str):
+    if not isinstance(node, DictConfig | Mapping):
         raise ConfigError(f"{key}: expected a mapping with a _target_ class")
-    try:
-        cls = get_class(target)
-    except Exception:  # noqa: BLE001 - hydra raises several kinds for a bad path
-        raise ConfigError(f"{key}._target_: no class {target!r}") from None
-    plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
-    assert isinstance(plain, Mapping)
-    fields = {str(k): v for k, v in plain.items() if k != "_target_"}
-    return typed(cls, fields, key)
+    return _built(object, node, key)
+
+
+STRUCTURE_LETTERS: dict[str, str] = {
+    "E": "evo.components.ga.EvolveChoice",
+    "R": "evo.components.ga.RandomChoice",
+}
+"""The letters ``ga.structure`` may also be given as (the method name's first letter:
+``ga.structure=R`` on the command line, the ablation's sweep, an older ``config.yaml``)
+and the class each stands for."""
+
+def structure_letter(structure: Any) -> str:
+    """The letter of a ``ga.structure`` value in either form (a letter, or a node whose
+    ``_target_`` is a class of :data:`STRUCTURE_LETTERS`; ``?`` for another class)."""
+    if isinstance(structure, DictConfig | Mapping):
+        letters = {target: letter for letter, target in STRUCTURE_LETTERS.items()}
+        return letters.get(str(structure.get("_target_")), "?")
+    return str(structure)
+
+
+OLD_LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo.PPO", "random": "evo.learners.ppo.PPO"}
+"""The ``learner.name`` of an older ``config.yaml`` and the class it stands for (its
+``update`` key, kept, says whether the policy learns)."""
+
+
+def current(cfg: DictConfig) -> DictConfig:
+    """``cfg`` in today's form: a run directory's ``config.yaml`` written by an older evo
+    resumes, and the shorthands ``ga.structure=E|R`` and
+    ``ga.mutation_operators=[<name>, ...]`` keep working.
+
+    * ``ga.structure`` given as a letter of :data:`STRUCTURE_LETTERS` becomes
+      ``{_target_: <its class>}``;
+    * ``ga.mutation_operators`` given by name (a key of
+      :data:`evo.robot.operators.MUTATIONS`) become ``{_target_: <its class>}``;
+    * a ``learner`` without ``_target_`` (``name: ppo|random`` and ``update``) becomes
+      the class :data:`OLD_LEARNERS` names, with its other keys, ``update`` included.
+
+    A config in today's form comes back as it was (a copy; ``cfg`` is left alone).
+
+    Raises:
+        ConfigError: For a letter or name that stands for nothing.
+    """
+    out = copy.deepcopy(cfg)
+    with open_dict(out):
+        ga = out.get("ga")
+        if isinstance(ga, DictConfig) and isinstance(ga.get("structure"), str):
+            letter = ga.structure
+            if letter not in STRUCTURE_LETTERS:
+                raise ConfigError(f"ga.structure: expected E (evolve) or R (random), got "
+                                  f"{letter!r}")
+            ga.structure = {"_target_": STRUCTURE_LETTERS[letter]}
+        if isinstance(ga, DictConfig) and isinstance(ga.get("mutation_operators"), ListConfig):
+            ga.mutation_operators = [_mutation(op, f"ga.mutation_operators[{i}]")
+                                     for i, op in enumerate(ga.mutation_operators)]
+        learner = out.get("learner")
+        if isinstance(learner, DictConfig) and "_target_" not in learner:
+            name = learner.pop("name", "ppo")
+            if name not in OLD_LEARNERS:
+                raise ConfigError(f"learner.name: unknown learner {name!r}; expected one of "
+                                  f"{', '.join(OLD_LEARNERS)}")
+            learner._target_ = OLD_LEARNERS[name]
+    return out
+
+
+def _mutation(op: Any, key: str) -> Any:
+    """A mutation operator of ``ga.mutation_operators``: a name becomes the node of its
+    class; a node is left as it is."""
+    from evo.robot.operators import MUTATIONS
+
+    if not isinstance(op, str):
+        return op
+    if op not in MUTATIONS:
+        raise ConfigError(f"{key}: unknown mutation operator {op!r}; expected one of "
+                          f"{', '.join(MUTATIONS)}")
+    cls = type(MUTATIONS[op])
+    return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}

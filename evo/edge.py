@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from omegaconf import DictConfig, OmegaConf
 
 from evo.components.executors import EvalExecutor
-from evo.config import ConfigError, instantiate, typed
+from evo.config import ConfigError, current, instantiate, typed
 from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
@@ -88,6 +88,7 @@ def training_parts(cfg: DictConfig) -> TrainingParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
+    cfg = current(cfg)
     return TrainingParts(
         physics=physics_of(cfg),
         env=env_of(cfg),
@@ -175,8 +176,8 @@ def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: 
                         tuple(r.name for r in robots), settings_config(cfg))
     open_folder(out, settings, what_trains)
     warn_if_failures_cannot_end(budget, "noise_ceiling.budget", parts.learner, parts.env)
-    # The random learner: the same network, never updated.
-    random_learner = dataclasses.replace(parts.learner, update=False, name="random")
+    # The random learner ("random"): the same network, never updated.
+    random_learner = dataclasses.replace(parts.learner, update=False)
     jobs = {role: Job(parts.physics, parts.env, learner, str(out), learner.name,
                       record=parts.record, config_yaml=settings.config)
             for role, learner in (("seed", parts.learner), ("baseline", random_learner))}

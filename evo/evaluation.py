@@ -7,7 +7,9 @@ its error in one line (an unexpected exception's traceback goes to
 fails for want of room is not the robot's failure: it raises
 ``evo.run.files.WriteFailed``, the run stops, and the robot, still in flight, is
 evaluated again on resume. The learner is the one the job's
-learner config names (``evo.learners.get_learner``) unless the caller passes another.
+learner config names (its ``train_function``) unless the caller passes another;
+so are the recorder's opener (``evo.record.open_recorder``) and the policy's writer
+(``evo.learners.common.save_checkpoint``).
 """
 
 from __future__ import annotations
@@ -28,10 +30,23 @@ from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import build_scene
 from evo.interrupt import critical, raised
-from evo.learners import Learner, get_learner
-from evo.learners.common import Inheritance, LearnerConfig, load_checkpoint, save_checkpoint
+from evo.learners import Learner
+from evo.learners.common import (
+    Inheritance,
+    LearnerConfig,
+    SavePolicy,
+    load_checkpoint,
+    save_checkpoint,
+)
 from evo.learners.rollouts import play
-from evo.record import Episode, RecordConfig, Recorder, open_recorder, should_record
+from evo.record import (
+    Episode,
+    OpenRecorder,
+    RecordConfig,
+    Recorder,
+    open_recorder,
+    should_record,
+)
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import parse_robot
 from evo.robot.tree import Robot
@@ -194,7 +209,9 @@ class EpisodeSampler:
         self.held = None
 
 
-def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> Outcome:
+def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None, *,
+             open_recorder: OpenRecorder = open_recorder,
+             save_policy: SavePolicy = save_checkpoint) -> Outcome:
     """Train ``candidate``'s robot for its budget; write its policy, its learning curve
     and the recordings the record config asks for (``evo.run.layout.RunLayout``).
 
@@ -202,13 +219,17 @@ def evaluate(candidate: Candidate, job: Job, learner: Learner | None = None) -> 
         candidate: The robot to train.
         job: What every evaluation of the run shares.
         learner: The training function; by default the one ``job.learner`` names.
+        open_recorder: Opens the evaluation's recorder (what ``job.record`` asks for).
+        save_policy: Writes the trained policy to ``evals/<name>.pt``.
     """
 
     start, cpu_start = time.perf_counter(), time.process_time()
     try:
         robot = parse_robot(json.loads(candidate.robot), source=candidate.name)
-        train = get_learner(job.learner) if learner is None else learner
-        outcome = _train_and_record(robot, candidate, job, train, start)
+        train = job.learner.train_function() if learner is None else learner
+        outcome = _train_and_record(robot, candidate, job, train, start,
+                                    open_recorder=open_recorder,
+                                    save_policy=save_policy)
     except Exception as err:  # noqa: BLE001 - any failure is recorded and the run goes on
         if (stop := raised()) is not None:  # a signal, turned into another error on its way
             raise stop from err
@@ -241,7 +262,8 @@ def inheritance(candidate: Candidate, layout: RunLayout) -> Inheritance | None:
 
 
 def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Learner,
-                      start: float) -> Outcome:
+                      start: float, *, open_recorder: OpenRecorder,
+                      save_policy: SavePolicy) -> Outcome:
     layout = RunLayout(Path(job.run_dir))
     layout.evals.mkdir(parents=True, exist_ok=True)
     model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
@@ -281,8 +303,8 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
             recorder.episode(dataclasses.replace(final, index=sampler.count,
                                                  env_step=result.env_steps))
         write_csv(layout.curve(candidate.name), result.curve)
-        save_checkpoint(result.policy, layout.policy(candidate.name), job.learner,
-                        robot=robot.hash)
+        save_policy(result.policy, layout.policy(candidate.name), job.learner,
+                    robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
                         "episodes": result.episodes, "predicted": predicted,

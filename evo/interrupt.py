@@ -154,8 +154,9 @@ def _worker_signal(signum: int, frame: FrameType | None) -> None:
     os._exit(EXIT_CODES.get(signal.Signals(signum), 128 + signum))
 
 
-def worker_init(parent: int) -> None:
-    """Tie this worker process to its parent, PID ``parent`` (see the module docstring)."""
+def worker_init(parent: int, grace_s: float = ORPHAN_GRACE_S) -> None:
+    """Tie this worker process to its parent, PID ``parent`` (see the module docstring);
+    orphaned, it spends at most ``grace_s`` seconds closing its files."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _worker_signal)
     signal.signal(signal.SIGALRM, _on_alarm)
@@ -172,7 +173,7 @@ def worker_init(parent: int) -> None:
             time.sleep(1.0)
         # A C-level timer (it needs no GIL) ends the process should the cleanup the
         # SIGTERM starts wait in C code, where no Python signal handler runs.
-        faulthandler.dump_traceback_later(ORPHAN_GRACE_S, exit=True)
+        faulthandler.dump_traceback_later(grace_s, exit=True)
         os.kill(os.getpid(), signal.SIGTERM)
 
     threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()

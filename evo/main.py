@@ -15,16 +15,23 @@ Tasks (``task=``):
   ceiling (``+exp=retrain``, ``evo.retrain``); ``resume=<run dir>`` continues it;
 * ``noise_sweep``: one trial of the noise-ceiling sweep (``+exp=noise_sweep``); it
   returns the trial's objectives to Hydra's Optuna sweeper.
+
+What the config does not choose, the code of ``task=evolve`` (the run's store, the
+evaluation, the run's log), is an argument of :func:`cli`: a script that runs evo with
+its own (a store that fails at a chosen write, in the fault tests) passes an
+:class:`EvolveCode`; ``python evo/main.py`` runs with evo's own.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import hydra
 import numpy as np
@@ -35,8 +42,9 @@ from omegaconf import DictConfig, OmegaConf
 from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, typed
+from evo.config import ConfigError, current, structure_letter, typed
 from evo.edge import (
+    CONF_DIR,
     executor_of,
     generator_of,
     limits_of,
@@ -44,9 +52,10 @@ from evo.edge import (
     training_parts,
     warn_if_failures_cannot_end,
 )
-from evo.evaluation import Job
+from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.interrupt import Interrupted, critical, handle_signals
+from evo.record import RecordConfig
 from evo.robot import (
     InvalidRobotError,
     Robot,
@@ -123,9 +132,11 @@ def method_label(structure: str, learns: bool) -> str:
     return f"{structure}+{'L' if learns else 'R'}"
 
 
-# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir.
+# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir;
+# ga.structure a letter (ga.structure=E,R) or its node (ga/structure=evolve,random).
 if not OmegaConf.has_resolver("evo_method"):
-    OmegaConf.register_new_resolver("evo_method", method_label)
+    OmegaConf.register_new_resolver(
+        "evo_method", lambda structure, learns: method_label(structure_letter(structure), learns))
 
 
 @dataclass(frozen=True)
@@ -144,6 +155,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     Raises:
         ConfigError: naming the key of the first bad value.
     """
+    cfg = current(cfg)
     parts = training_parts(cfg)
     learner = parts.learner
     ga = typed(GAConfig, cfg.ga, "ga")
@@ -157,12 +169,40 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     return EvolveParts(ga, strategy, job, executor)
 
 
-def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+@dataclass(frozen=True)
+class EvolveCode:
+    """The code ``task=evolve`` runs with, where the config chooses none: evo's own by
+    default. Each is what a run calls, so one of another class changes what a run does
+    at that seam and nothing else.
+
+    Attributes:
+        store: Makes the run's store from its directory (``evo.run.store.RunStore``, or
+            a subclass: one that saves its files elsewhere too, or fails at a chosen
+            write).
+        evaluate: Trains one robot (``evo.evaluation.evaluate``, or a
+            ``functools.partial`` of it with another ``learner``, ``open_recorder`` or
+            ``save_policy``). Executors with worker processes pickle it: a module-level
+            function, or a partial of one.
+        run_log: Makes what mirrors every history row into ``run.mcap`` and ``run.rrd``
+            (``evo.evolution.RunLog``, or a subclass).
+    """
+
+    store: Callable[[Path], RunStore] = RunStore
+    evaluate: Callable[[Candidate, Job], Outcome] = evaluate
+    run_log: Callable[[RunStore, RecordConfig, dict[str, Any]], RunLog] = RunLog
+
+
+EVO_CODE = EvolveCode()
+"""evo's own code of ``task=evolve``."""
+
+
+def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO_CODE) -> None:
     """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues.
 
     Everything is checked before anything is written: the config, and when the
     directory holds a run, its saved state (:meth:`evo.run.store.RunStore.load`). A
-    resume that fails leaves the directory as it was.
+    resume that fails leaves the directory as it was. ``code`` makes the store, the
+    run's log and the evaluations.
     """
     from evo.progress import evolution_progress, print_summary
 
@@ -171,7 +211,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         cfg = _resumed_config(Path(str(cfg.resume)))
         check_seed(cfg)
     parts = evolve_parts(cfg, out)
-    store = RunStore(out)
+    store = code.store(out)
     saved = _state_to_continue(store, resuming)
     if resuming:
         lock.claim()
@@ -180,7 +220,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     evolution: Evolution | None = None
     try:
         with critical():  # opened whole, so the finally below can close it
-            log = RunLog(store, parts.job.record, {
+            log = code.run_log(store, parts.job.record, {
                 "config": parts.job.config_yaml, "seed": int(cfg.seed),
                 "method": parts.job.method, "name": out.name})
         with evolution_progress(budgets, parts.job.method) as show:
@@ -192,7 +232,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock) -> None:
 
             evolution = Evolution(store, ga=parts.ga, strategy=parts.strategy, job=parts.job,
                                   executor=parts.executor, seed=int(cfg.seed),
-                                  on_result=on_result)
+                                  on_result=on_result, evaluate=code.evaluate)
             if saved is not None:
                 evolution.resume(saved)
                 show.resumed(evolution.history)
@@ -244,7 +284,8 @@ def check_seed(cfg: DictConfig) -> int:
 
 
 def _resumed_config(run_dir: Path) -> DictConfig:
-    """The resolved config a run directory was started with."""
+    """The resolved config a run directory was started with, in today's form
+    (:func:`evo.config.current`: a run of an older evo resumes)."""
     path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
@@ -257,7 +298,7 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     loaded = OmegaConf.load(path)
     assert isinstance(loaded, DictConfig)
     loaded.resume = None
-    return loaded
+    return current(loaded)
 
 
 def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> None:
@@ -320,9 +361,9 @@ TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
 }
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
-def main(cfg: DictConfig) -> object:
-    """Dispatch on ``task`` in a run directory this process owns (``evo.run.files``).
+def main(cfg: DictConfig, code: EvolveCode = EVO_CODE) -> object:
+    """Dispatch on ``task`` in a run directory this process owns (``evo.run.files``);
+    ``task=evolve`` runs with ``code``.
 
     A bad config value, or a directory another process holds, ends the run with one
     clear line (exit 2). SIGINT or SIGTERM stop it cleanly (``evo.interrupt``): the
@@ -348,7 +389,10 @@ def main(cfg: DictConfig) -> object:
             torch.set_num_threads(threads)
             if cfg.resume is None:
                 check_seed(cfg)
+                cfg = current(cfg)  # config.yaml holds today's form (ga.structure=R too)
                 _write_config(cfg, out, lock)
+            if task is run_evolve:  # the one task whose code a caller may choose
+                task = functools.partial(run_evolve, code=code)
             return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None
     except ConfigError as err:
         print(f"error: bad config: {err}", file=sys.stderr)
@@ -366,9 +410,9 @@ def main(cfg: DictConfig) -> object:
               file=sys.stderr)
         sys.exit(1)
     except (Interrupted, KeyboardInterrupt) as stop:
-        code = stop.exit_code if isinstance(stop, Interrupted) else 130
+        status = stop.exit_code if isinstance(stop, Interrupted) else 130
         print(f"interrupted; {_how_to_continue(cfg, out)}", file=sys.stderr)
-        sys.exit(code)
+        sys.exit(status)
 
 
 def _task_name(cfg: DictConfig) -> str:
@@ -446,7 +490,22 @@ def _resume_in_place(argv: list[str]) -> list[str]:
     return argv
 
 
-if __name__ == "__main__":
+def cli(code: EvolveCode = EVO_CODE) -> None:
+    """``python evo/main.py [overrides]``: the command line in ``sys.argv``, through
+    Hydra (its config tree is ``conf/``), with ``code`` for ``task=evolve``.
+
+    A script that runs evo with code of its own sets ``sys.argv`` to the command line
+    (``[".../evo/main.py", *overrides]``) and calls this.
+    """
     _check_run_dir_arg(sys.argv[1:])
     sys.argv = _resume_in_place(sys.argv)
-    main()
+
+    @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
+    def run(cfg: DictConfig) -> object:
+        return main(cfg, code)
+
+    run()
+
+
+if __name__ == "__main__":
+    cli()

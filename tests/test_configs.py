@@ -17,10 +17,11 @@ import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.errors import HydraException
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
 from evo.components.ga import (
@@ -31,10 +32,11 @@ from evo.components.ga import (
     ReplaceWorst,
     Roulette,
 )
-from evo.config import ConfigError, typed
+from evo.config import ConfigError, current, typed
 from evo.edge import physics_of, warn_if_failures_cannot_end
 from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
+from evo.learners.ppo import PPO
 from evo.main import (
     TASKS,
     EvolveParts,
@@ -43,6 +45,7 @@ from evo.main import (
     _write_config,
     evolve_parts,
 )
+from evo.robot.operators import RotateEdge
 
 REPO = Path(__file__).resolve().parents[1]
 CONF = REPO / "conf"
@@ -256,6 +259,75 @@ def test_ablation_is_a_multirun_of_the_four_methods(
     assert len(sweep(more)) == 12
 
 
+# ---- older configs and shorthands ----------------------------------------------------------
+
+OLD_CONFIG = REPO / "tests" / "data" / "run_58aad82" / "stopped" / "config.yaml"
+"""The ``config.yaml`` evo wrote at commit 58aad82: ``ga.structure: E``, a ``learner``
+with ``name`` and ``update`` and no ``_target_``."""
+OLD_RUN_VALUES = [
+    "ga.population_size=3", "ga.robot_budget=6", "ga.schedule.initial=256",
+    "ga.schedule.first=256", "ga.schedule.last=768", "learner.num_envs=4",
+    "learner.epochs=1", "learner.minibatch_size=128", "learner.hidden=[32,32]",
+    "env.task.t_max=40", "executor=serial", "record=off"]
+"""Today's overrides for the values of that run."""
+
+
+def test_an_older_config_yaml_gives_todays_typed_config(hydra_conf: None, tmp_path: Path) -> None:
+    old = OmegaConf.load(OLD_CONFIG)
+    assert isinstance(old, DictConfig) and old.ga.structure == "E" and "name" in old.learner
+    resumed = build(old, tmp_path / "old")
+    today = build(compose("config", overrides=OLD_RUN_VALUES), tmp_path / "today")
+    assert resumed.ga == today.ga and type(resumed.strategy) is Evolve
+    assert resumed.job.learner == today.job.learner and type(resumed.job.learner) is PPO
+    assert (resumed.job.physics, resumed.job.env) == (today.job.physics, today.job.env)
+    assert resumed.job.method == today.job.method == "E+L"
+    # The same run with the random structures and learner of that time: R+R.
+    old.ga.structure, old.learner.name, old.learner.update = "R", "random", False
+    random = build(old, tmp_path / "random")
+    assert type(random.strategy) is RandomStructures and random.job.method == "R+R"
+    assert random.job.learner.name == "random"
+    # What today's code writes reads back as the same config.
+    written = tmp_path / "written"
+    written.mkdir()
+    _write_config(current(compose("config", overrides=OLD_RUN_VALUES)), written)
+    again = build(OmegaConf.load(written / "config.yaml"), written)
+    assert again.ga == today.ga and again.job.learner == today.job.learner
+
+
+def test_the_shorthands_stand_for_their_classes(hydra_conf: None, tmp_path: Path) -> None:
+    for letter, group, strategy in (("E", "evolve", Evolve), ("R", "random", RandomStructures)):
+        by_letter = build(compose("config", overrides=[f"ga.structure={letter}"]), tmp_path)
+        by_group = build(compose("config", overrides=[f"ga/structure={group}"]), tmp_path)
+        assert type(by_letter.strategy) is type(by_group.strategy) is strategy
+        assert by_letter.ga == by_group.ga and by_letter.job.method == f"{letter}+L"
+    default = compose("config")
+    assert current(default) == default, "today's form comes back as it was"
+    for letter, override in ("E", "ga/structure=evolve"), ("R", "ga.structure=R"):
+        cfg = compose("config", overrides=[override])
+        with open_dict(cfg):
+            cfg.subdir = "${evo_method:${ga.structure},${learner.update}}"
+        assert cfg.subdir == f"{letter}+L", "the resolver reads either form"
+    named = build(compose("config", overrides=["ga.mutation_operators=[rotate_edge]"]), tmp_path)
+    assert named.ga.mutation_operators == (RotateEdge(),)
+    old = OmegaConf.load(OLD_CONFIG)
+    old.learner.name = "teleport"
+    with pytest.raises(ConfigError, match="learner.name: unknown learner 'teleport'"):
+        current(old)
+
+
+def test_a_runs_method_comes_from_either_form_of_its_config(
+    hydra_conf: None, tmp_path: Path
+) -> None:
+    from analysis.load import run_method
+
+    today = OmegaConf.to_container(current(compose(
+        "config", overrides=["ga/structure=random", "learner=random"])), resolve=True)
+    old = {"ga": {"structure": "R"}, "learner": {"name": "random", "update": False}}
+    for config in (today, old):  # a run directory without history or summary
+        assert isinstance(config, dict)
+        assert run_method(tmp_path, pd.DataFrame(), config) == "R+R", config
+
+
 # ---- bad values stop the run at start ---------------------------------------------------------
 
 BAD_VALUES = [
@@ -269,8 +341,15 @@ BAD_VALUES = [
     ("+ga.schedule.ramp=2", "ga.schedule: unknown key(s) ramp"),
     ("ga.selection.epsilon=0", "ga.selection: epsilon must be positive"),
     ("ga.selection._target_=nowhere.Nothing", "ga.selection._target_: no class"),
+    ("ga.structure._target_=evo.components.ga.Roulette",
+     "ga.structure._target_: expected a StructureChoice (or a subclass), got Roulette"),
+    ("learner._target_=evo.components.ga.Roulette",
+     "learner._target_: expected a LearnerConfig (or a subclass), got Roulette"),
     ("ga.mutation_rate=2", "ga: mutation_rate must be in [0, 1]"),
-    ("ga.mutation_operators=[teleport]", "ga: unknown mutation operators ['teleport']"),
+    ("ga.mutation_operators=[rotate_edge,teleport]",
+     "ga.mutation_operators[1]: unknown mutation operator 'teleport'"),
+    ("ga.mutation_operators=[{_target_:evo.components.ga.Roulette}]",
+     "ga.mutation_operators[0]._target_: expected a Mutation (or a subclass), got Roulette"),
     ("ga.crossover_tries=many", "ga.crossover_tries: expected an integer, got 'many'"),
     ("ga.eval_timeout_s=-1", "ga: eval_timeout_s must be >= 0 (0 = none), got -1"),
     ("ga.eval_timeout_s=soon", "ga.eval_timeout_s: expected a number, got 'soon'"),

@@ -44,7 +44,7 @@ from evo.components.ga import (
 from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, evaluation_seed
-from evo.learners.common import LearnerConfig
+from evo.learners.ppo import PPO
 from evo.robot import OperatorError, load_robot
 from evo.robot.builder import PhysicsParams
 from evo.run.records import HistoryRow
@@ -93,7 +93,7 @@ def make_evolution(
         store or RunStore(run_dir),
         ga=ga,
         strategy=Evolve(ga) if structure == "E" else RandomStructures(),
-        job=Job(PhysicsParams(), EnvConfig(), LearnerConfig(), str(run_dir), f"{structure}+L"),
+        job=Job(PhysicsParams(), EnvConfig(), PPO(), str(run_dir), f"{structure}+L"),
         executor=executor or SerialExecutor(),
         seed=seed,
         on_result=on_result,
@@ -432,9 +432,7 @@ def run(cmd: list[str], cwd: Path, timeout: float = 240) -> subprocess.Completed
 
 
 def killed(point: str, k: int, *args: str, cwd: Path) -> None:
-    done = run(
-        [sys.executable, "-c", DRIVER, str(REPO / "evo" / "main.py"), point, str(k), *args], cwd
-    )
+    done = run([sys.executable, str(DRIVER), point, str(k), *args], cwd)
     assert done.returncode == -signal.SIGKILL, (point, k, done.returncode, done.stderr[-2000:])
 
 

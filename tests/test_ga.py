@@ -34,7 +34,7 @@ from evo.components.ga import (
 )
 from evo.envs.params import EnvConfig
 from evo.evaluation import Candidate, Job, Outcome, evaluate
-from evo.learners.common import LearnerConfig
+from evo.learners.ppo import PPO
 from evo.record.readback import read_curve
 from evo.robot import GeneratorParams, Limits, Robot, parse_robot, random_robot
 from evo.robot.builder import PhysicsParams
@@ -402,7 +402,7 @@ def test_serial_executor_returns_results_and_errors_through_futures() -> None:
         future.result()
 
 
-TINY = LearnerConfig(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, hidden=(16,))
+TINY = PPO(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, hidden=(16,))
 
 
 def tiny_job(run_dir: Path) -> Job:

@@ -37,6 +37,7 @@ from evo.learners.common import (
     load_checkpoint,
     make_policy,
 )
+from evo.learners.ppo import PPO
 from evo.record import RecordConfig
 from evo.robot import parse_robot, random_robots
 from evo.robot.builder import PhysicsParams, build
@@ -45,7 +46,7 @@ from evo.robot.tree import ModuleType, Robot, walk
 from evo.run.records import HistoryRow
 from evo.run.store import RunStore
 
-CONFIG = LearnerConfig(hidden=(16, 16))
+CONFIG = PPO(hidden=(16, 16))
 
 
 def motor() -> dict[str, Any]:
@@ -333,7 +334,7 @@ def test_bad_inheritance_settings_are_named() -> None:
 
 # ---- real training: the worker reads the parent's checkpoint; resume --------------------
 
-TINY = LearnerConfig(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, hidden=(16, 16))
+TINY = PPO(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, hidden=(16, 16))
 SHORT = EnvConfig(task=TaskParams(t_max=40))
 
 

@@ -13,7 +13,6 @@ import torch
 from evo.components.inheritance import policy_start
 from evo.edge import compose_config, training_parts
 from evo.envs.params import EnvConfig, TaskParams, observation_size
-from evo.learners import get_learner
 from evo.learners.common import (
     Inheritance,
     LearnerConfig,
@@ -21,6 +20,7 @@ from evo.learners.common import (
     make_policy,
     save_checkpoint,
 )
+from evo.learners.ppo import PPO
 from evo.learners.ppo import train as train_ppo
 from evo.learners.rollouts import evaluate_policy
 from evo.robot import load_robot, parse_robot
@@ -34,7 +34,7 @@ PHYSICS = PhysicsParams()
 # shows within a test-sized budget; the full task is exercised by bench/train_throughput.py.
 NEAR = EnvConfig(task=TaskParams(t_max=200, target_min=0.3, target_max=0.6))
 BUDGET = 60_000  # env steps: three seeds tried all reach 100% deterministic success
-SMALL = LearnerConfig(num_envs=16, rollout_steps=64, epochs=10, minibatch_size=512)
+SMALL = PPO(num_envs=16, rollout_steps=64, epochs=10, minibatch_size=512)
 
 
 def curve_without_time(curve: pd.DataFrame) -> pd.DataFrame:
@@ -57,8 +57,8 @@ def ppo_run():  # noqa: ANN201
 
 @pytest.fixture(scope="module")
 def random_run():  # noqa: ANN201
-    random = dataclasses.replace(SMALL, name="random", update=False)  # conf/learner/random
-    return get_learner(random)(
+    random = dataclasses.replace(SMALL, update=False)  # conf/learner/random
+    return random.train_function()(
         FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=random, budget=BUDGET, seed=1
     )
 

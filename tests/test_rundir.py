@@ -26,7 +26,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -162,16 +162,44 @@ def test_the_lock_refuses_a_second_holder_and_is_freed_when_released(tmp_path: P
         assert is_locked(tmp_path)
 
 
-SIGNAL_AT = {
-    "opening the MCAP file": (mcap_file, "scene_geometry"),
-    "opening the rerun file": (rrd, "scene_geometry"),
-    "closing the MCAP file": (mcap_file.McapFile, "close"),
+def signal_self() -> None:
+    os.kill(os.getpid(), signal.SIGINT)
+
+
+class McapOpened(mcap_file.McapRecorder):
+    """An MCAP recorder that signals as soon as its file is open (not yet handed over)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        signal_self()
+
+
+class RerunOpened(rrd.RerunRecorder):
+    """A rerun recorder that signals as soon as its file is open (not yet handed over)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        signal_self()
+
+
+class McapClosing(mcap_file.McapRecorder):
+    """An MCAP recorder that signals as it starts to finish its file."""
+
+    def _close(self, summary: Mapping[str, Any]) -> None:
+        signal_self()
+        super()._close(summary)
+
+
+SIGNAL_AT = {  # the recorders an evaluation opens, one of them signalling
+    "opening the MCAP file": (McapOpened, rrd.RerunRecorder),
+    "opening the rerun file": (mcap_file.McapRecorder, RerunOpened),
+    "closing the MCAP file": (McapClosing, rrd.RerunRecorder),
 }
 
 
 @pytest.mark.parametrize("moment", list(SIGNAL_AT))
 def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, moment: str
+    tmp_path: Path, moment: str
 ) -> None:
     """A real SIGINT, sent by the process to itself at ``moment``, is held back until
     the files are safe: the evaluation then stops and every recording reads back."""
@@ -179,20 +207,22 @@ def test_a_signal_while_recordings_open_or_close_leaves_them_readable(
 
     from evo.evaluation import Job, evaluate
     from evo.interrupt import Interrupted, handle_signals
-    from evo.record import read_metadata
+    from evo.record import RecordConfig, Recorder, Recorders, read_metadata
     from evo.robot.builder import PhysicsParams
 
-    owner, name = SIGNAL_AT[moment]
-    original = getattr(owner, name)
+    mcap, rerun = SIGNAL_AT[moment]
 
-    def signalled(*args: object, **kwargs: object) -> object:
-        os.kill(os.getpid(), signal.SIGINT)
-        return original(*args, **kwargs)
+    def open_recorder(config: RecordConfig, directory: str | Path, name: str, model: Any,
+                      metadata: Mapping[str, Any]) -> Recorder:
+        """Both files, as ``evo.record.open_recorder`` opens them, by these classes."""
+        meta, folder = {"name": name, **metadata}, Path(directory)
+        return Recorders([mcap(folder / f"{name}.mcap", model, meta),
+                          rerun(folder / f"{name}.rrd", model, meta)])
 
-    monkeypatch.setattr(owner, name, signalled)
     candidate = real_candidate(float("-inf"))
     with handle_signals(), pytest.raises(Interrupted):
-        evaluate(candidate, Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)))
+        evaluate(candidate, Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path)),
+                 open_recorder=open_recorder)
     files = sorted(p.name for p in (tmp_path / "evals").iterdir())
     assert f"{candidate.name}.mcap" in files and f"{candidate.name}.rrd" in files, files
     assert unreadable_files(tmp_path) == []
@@ -210,10 +240,9 @@ def test_a_signal_that_cleanup_turns_into_another_error_is_not_a_failed_robot(
 
     from evo.evaluation import Job, evaluate
     from evo.interrupt import Interrupted, handle_signals
-    from evo.learners import get_learner
     from evo.robot.builder import PhysicsParams
 
-    ppo = get_learner(TINY_LEARNER)
+    ppo = TINY_LEARNER.train_function()
 
     def converting(robot: Robot, **kwargs: Any) -> Any:
         """The real learner, whose curve callback is unwound by such a library ``finally``."""
@@ -417,8 +446,7 @@ ORPHAN = """
 import os, signal, subprocess, sys, time
 if sys.argv[1] == "worker":
     import evo.interrupt
-    evo.interrupt.ORPHAN_GRACE_S = 1.0
-    evo.interrupt.worker_init(os.getppid())
+    evo.interrupt.worker_init(os.getppid(), grace_s=1.0)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a cleanup that no signal reaches
     print("ready", flush=True)
     time.sleep(120)
@@ -453,8 +481,9 @@ def test_the_kill_and_resume_harness_loses_nothing(tmp_path: Path) -> None:
 
 
 # ---- a full disk ---------------------------------------------------------------------------
-# tests/full_disk.py runs evo/main.py and lowers the process's real file-size limit
-# (RLIMIT_FSIZE) just before one write of the kind under test, which then fails in the
+# tests/full_disk.py runs evo/main.py, with a store and an evaluation that watch evo's own
+# writes, and lowers the process's real file-size limit (RLIMIT_FSIZE) just before one
+# write of the kind under test, which then fails in the
 # kernel (EFBIG) as on a full disk. One run directory goes through a session per kind,
 # each a resume of the one before: each records its rows, then meets the full disk; the
 # last resume, with room again, must give the uninterrupted run's history.
@@ -477,8 +506,7 @@ SDK_LOG = ("re_log_encoding::", "re_sdk::")
 
 
 def full_disk_cmd(kind: str, after: int, *args: str) -> list[str]:
-    return [sys.executable, str(REPO / "tests" / "full_disk.py"), kind, str(after),
-            str(REPO / "evo" / "main.py"), *args]
+    return [sys.executable, str(REPO / "tests" / "full_disk.py"), kind, str(after), *args]
 
 
 def evo_lines(stderr: str) -> list[str]:

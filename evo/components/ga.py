@@ -1,4 +1,5 @@
-"""The genetic algorithm's parts (paper section 6), each a small Hydra-instantiable piece.
+"""The genetic algorithm's parts (paper section 6), each a dataclass a config names with
+``_target_`` (``conf/ga/``, built by :func:`evo.config.typed`).
 
 * ``Roulette``: fitness-proportional selection (paper Eq. 9). Fitness may be negative, so
   probabilities use fitness shifted by the population minimum plus ``epsilon``
@@ -12,13 +13,14 @@
   from a parent's policy (``ga.inheritance``) gets ``inherited`` times that.
 * ``Evolve`` (structure strategy ``E``): two parents by selection, one offspring by
   subtree crossover (optionally mutated). ``RandomStructures`` (``R``): every new robot is
-  a fresh random structure, no parents.
+  a fresh random structure, no parents. ``ga.structure`` chooses one by naming its
+  :class:`StructureChoice` (``EvolveChoice``, ``RandomChoice``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -31,6 +33,7 @@ from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
     GeneratorParams,
+    Mutation,
     OperatorError,
     Origins,
     crossover,
@@ -244,12 +247,34 @@ class Evolve:
 
 # ---- the ga config group ----------------------------------------------------------------
 
-STRUCTURES: dict[str, Callable[[GAConfig, RandomStructures], StructureStrategy]] = {
-    "E": Evolve, "R": lambda ga, fresh: fresh,
-}
-"""Structure strategies by code (``ga.structure``, the letter before ``+`` in a method
-name): each makes its strategy from the ``ga`` config and the random structures of the
-``morphology`` group. A new strategy is one entry here."""
+
+@dataclass(frozen=True, slots=True)
+class StructureChoice:
+    """What ``ga.structure`` names with its ``_target_``: the strategy that makes the run's
+    robots (``conf/ga/structure/``). A new strategy is a subclass whose :meth:`strategy`
+    makes it; ``ga.structure=E|R`` are :data:`evo.config.STRUCTURE_LETTERS`."""
+
+    def strategy(self, ga: GAConfig, fresh: RandomStructures) -> StructureStrategy:
+        """The strategy, with the ``ga`` config's breeding settings and ``fresh``, the
+        random structures of the ``morphology`` group."""
+        raise NotImplementedError(f"{type(self).__name__} makes no structure strategy")
+
+
+@dataclass(frozen=True, slots=True)
+class EvolveChoice(StructureChoice):
+    """``E``, the paper's method: offspring by crossover of two parents (:class:`Evolve`)."""
+
+    def strategy(self, ga: GAConfig, fresh: RandomStructures) -> StructureStrategy:
+        return Evolve(ga, fresh)
+
+
+@dataclass(frozen=True, slots=True)
+class RandomChoice(StructureChoice):
+    """``R``, the ablation's baseline: every robot a fresh random one
+    (:class:`RandomStructures`)."""
+
+    def strategy(self, ga: GAConfig, fresh: RandomStructures) -> StructureStrategy:
+        return fresh
 
 
 @dataclass(frozen=True, slots=True)
@@ -259,14 +284,15 @@ class GAConfig:
     Attributes:
         population_size: Robots in the population (the initial ones are random).
         robot_budget: Robots evaluated in all, initial ones included.
-        structure: Structure strategy, a key of :data:`STRUCTURES`.
+        structure: Which structure strategy makes the robots.
         selection: How parents are chosen (``E``).
         replacement: Steady-state replacement.
         schedule: Training budget of every evaluation.
         crossover_tries: Swaps tried per parent pair before a new pair is drawn (``E``).
         parent_tries: Parent pairs tried before breeding gives up (``E``).
         mutation_rate: Probability an offspring is also mutated (``E``; 0 in the paper).
-        mutation_operators: Which mutation operators may be used (``E``).
+        mutation_operators: The mutation operators an offspring may get, one drawn
+            at random (``E``).
         eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
         early_rejection: When an offspring's training may stop early.
         inheritance: Whether an offspring's policy starts from a parent's, a key of
@@ -275,14 +301,14 @@ class GAConfig:
 
     population_size: int = 20
     robot_budget: int = 100
-    structure: str = "E"
+    structure: StructureChoice = field(default_factory=EvolveChoice)
     selection: Roulette = field(default_factory=Roulette)
     replacement: ReplaceWorst = field(default_factory=ReplaceWorst)
     schedule: BudgetSchedule = field(default_factory=BudgetSchedule)
     crossover_tries: int = 100
     parent_tries: int = 20
     mutation_rate: float = 0.0
-    mutation_operators: tuple[str, ...] = tuple(MUTATIONS)
+    mutation_operators: tuple[Mutation, ...] = tuple(MUTATIONS.values())
     eval_timeout_s: float = 0.0
     early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
     inheritance: str = "off"
@@ -296,25 +322,18 @@ class GAConfig:
             )
         at_least(self, 1, "crossover_tries", "parent_tries")
         at_least(self, 0, "eval_timeout_s", note=" (0 = none)")
-        if self.structure not in STRUCTURES:
-            raise ValueError(f"structure: expected E (evolve) or R (random), got "
-                             f"{self.structure!r}")
         if not 0 <= self.mutation_rate <= 1:
             raise ValueError(f"mutation_rate must be in [0, 1], got {self.mutation_rate}")
         if self.inheritance not in INHERITANCE_MODES:
             raise ValueError(f"inheritance: expected one of {', '.join(INHERITANCE_MODES)}, "
                              f"got {self.inheritance!r}")
-        unknown = set(self.mutation_operators) - set(MUTATIONS)
-        if unknown:
-            raise ValueError(f"unknown mutation operators {sorted(unknown)}; expected some of "
-                             f"{sorted(MUTATIONS)}")
 
     def strategy(self, generator: GeneratorParams | None = None,
                  limits: Limits | None = None) -> StructureStrategy:
         """The structure strategy ``structure`` names, making robots with ``generator``
         within ``limits`` (the ``morphology`` group; defaults when None)."""
         fresh = RandomStructures(generator or GeneratorParams(), limits or Limits())
-        return STRUCTURES[self.structure](self, fresh)
+        return self.structure.strategy(self, fresh)
 
     def expected_budgets(self) -> list[int]:
         """:meth:`budgets` as the run is expected to spend them: with ``inheritance`` on,

@@ -1,20 +1,22 @@
 """Learners of the inner loop (SPEC section 4): what a learner is, and which exist.
 
 A learner trains one robot's behaviour for a budget of env steps and returns its
-fitness, learning curve and policy (:class:`Learner`). Learners are looked up by the
-``name`` of their config (``conf/learner/<name>.yaml``) in :data:`LEARNERS`:
+fitness, learning curve and policy (:class:`Learner`). A ``conf/learner/<name>.yaml``
+names its learner's config class with ``_target_``, a subclass of
+:class:`evo.learners.common.LearnerConfig` whose ``train_function`` is the learner:
 
-* ``ppo``: PPO through TorchRL (:mod:`evo.learners.ppo`);
-* ``random``: the same PPO loop with ``update: false``: the network at its seeded
+* ``ppo``: :class:`evo.learners.ppo.PPO`, PPO through TorchRL;
+* ``random``: the same class with ``update: false``: the network at its seeded
   initialisation, never trained (the "R" behaviour of the paper's ablations).
 
 To add a learner, write a module with a ``train`` function of the :class:`Learner`
-signature, give it a ``conf/learner/<name>.yaml`` and an entry here.
+signature and a frozen dataclass subclassing ``LearnerConfig`` whose
+``train_function`` returns it and whose ``name`` labels it (new settings are its new
+fields), and give it a ``conf/learner/<name>.yaml`` whose ``_target_`` names that class.
 """
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Protocol
 
@@ -52,16 +54,3 @@ class Learner(Protocol):
         on_episode: EpisodeHook | None = None,
         start: Inheritance | None = None,
     ) -> TrainResult: ...
-
-
-LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo", "random": "evo.learners.ppo"}
-"""Learner name -> the module whose ``train`` it is (imported when first asked for)."""
-
-
-def get_learner(config: LearnerConfig) -> Learner:
-    """The ``train`` function of the learner ``config.name``."""
-    if config.name not in LEARNERS:
-        raise ValueError(f"learner.name: unknown learner {config.name!r}; expected one of "
-                         f"{', '.join(sorted(LEARNERS))}")
-    train: Learner = importlib.import_module(LEARNERS[config.name]).train
-    return train

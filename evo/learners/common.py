@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import pandas as pd
 import torch
@@ -27,13 +27,17 @@ from evo.envs.params import ACTUATOR_SLOTS, action_size, observation_origins
 from evo.robot.tree import Robot
 from evo.run.files import write_bytes
 
+if TYPE_CHECKING:
+    from evo.learners import Learner
+
 
 @dataclass(frozen=True, slots=True)
 class LearnerConfig:
-    """One ``conf/learner/*.yaml``.
+    """The settings every learner shares, a base class: the class a ``conf/learner/*.yaml``
+    names with ``_target_`` (:class:`evo.learners.ppo.PPO`) is a subclass that says which
+    ``train`` function it configures (:meth:`train_function`) and its label (:attr:`name`).
 
     Attributes:
-        name: ``ppo`` (learns) or ``random`` (the same network, never updated).
         update: Whether the policy is trained (False for the random learner).
         total_steps: Training budget in env steps when run alone (the GA sets its own).
         num_envs: Arenas stepped together in one process.
@@ -60,7 +64,6 @@ class LearnerConfig:
         eval_episodes: Episodes of the deterministic evaluation after training.
     """
 
-    name: str = "ppo"
     update: bool = True
     total_steps: int = 150_000
     num_envs: int = 32
@@ -104,6 +107,16 @@ class LearnerConfig:
                 f"{self.frames_per_batch} env steps")
         if not self.hidden or min(self.hidden) < 1:
             raise ValueError(f"hidden must list positive layer widths, got {self.hidden}")
+
+    @property
+    def name(self) -> str:
+        """The learner's label (progress, a training's ``summary.json``)."""
+        raise NotImplementedError(f"{type(self).__name__} has no learner name")
+
+    def train_function(self) -> Learner:
+        """The ``train`` function these settings are for."""
+        raise NotImplementedError(f"{type(self).__name__} names no train function; a "
+                                  "learner's config is a subclass, e.g. evo.learners.ppo.PPO")
 
     @property
     def frames_per_batch(self) -> int:
@@ -405,6 +418,18 @@ def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig, *,
     data = io.BytesIO()  # torch reports a failed write without its cause: written here
     torch.save(state, data)
     return write_bytes(path, data.getvalue())
+
+
+class SavePolicy(Protocol):
+    """Writes a trained policy (:func:`save_checkpoint` is evo's own).
+
+    ``evo.evaluation.evaluate`` takes one beside its learner: a writer that also
+    exports the policy in another form is one of this signature. What it writes at
+    ``path`` is what :func:`load_checkpoint` reads (a child's inherited policy, a replay).
+    """
+
+    def __call__(self, policy: Policy, path: Path, config: LearnerConfig, *,
+                 robot: str = "") -> Path: ...
 
 
 def load_checkpoint(path: Path, *, robot: Robot | None = None,

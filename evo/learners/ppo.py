@@ -26,6 +26,7 @@ import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -37,7 +38,7 @@ from torchrl.objectives.value import GAE
 
 from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
-from evo.learners import CurveHook, EpisodeHook
+from evo.learners import CurveHook, EpisodeHook, Learner
 from evo.learners.common import (
     Inheritance,
     LearnerConfig,
@@ -110,6 +111,21 @@ def _update(
                     sums[name] += float(out[key].detach().mean())
             count += 1
     return {name: value / count for name, value in sums.items()}
+
+
+@dataclass(frozen=True, slots=True)
+class PPO(LearnerConfig):
+    """PPO's settings (``conf/learner/ppo.yaml``, ``_target_: evo.learners.ppo.PPO``): the
+    fields of :class:`~evo.learners.common.LearnerConfig`; with ``update`` false the
+    random learner (``conf/learner/random.yaml``)."""
+
+    @property
+    def name(self) -> str:
+        """``ppo``, or ``random`` for the policy never updated."""
+        return "ppo" if self.update else "random"
+
+    def train_function(self) -> Learner:
+        return train
 
 
 def train(

@@ -19,7 +19,6 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from evo.envs.params import EnvConfig, observation_size
-from evo.learners import get_learner
 from evo.learners.common import LearnerConfig, TrainResult, load_checkpoint, save_checkpoint
 from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
@@ -57,7 +56,7 @@ def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
     out.mkdir(parents=True, exist_ok=True)
     layout = TrainLayout(out)
     save_robot(robot, layout.robot)
-    train = get_learner(learner)
+    train = learner.train_function()
     with _progress(console) as bar:
         task = bar.add_task(f"{learner.name} {robot.name}", total=learner.total_steps, status="")
 

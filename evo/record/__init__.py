@@ -19,7 +19,13 @@ from typing import TYPE_CHECKING, Any
 
 from evo.episode import Episode
 from evo.record.base import NullRecorder, Recorder, Recorders
-from evo.record.config import EpisodeChoice, RecordConfig, open_recorder, should_record
+from evo.record.config import (
+    EpisodeChoice,
+    OpenRecorder,
+    RecordConfig,
+    open_recorder,
+    should_record,
+)
 
 if TYPE_CHECKING:
     from evo.record.geometry import Geometry, scene_geometry
@@ -59,6 +65,7 @@ __all__ = [
     "Geometry",
     "McapRecorder",
     "NullRecorder",
+    "OpenRecorder",
     "RecordConfig",
     "RecordError",
     "Recorder",

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from evo.checks import at_least
 
@@ -84,6 +84,26 @@ def should_record(config: RecordConfig, episode_index: int, is_last: bool) -> bo
         or (choice.last and is_last)
         or (choice.every > 0 and episode_index % choice.every == 0)
     )
+
+
+class OpenRecorder(Protocol):
+    """Opens the recorder of one evaluation (:func:`open_recorder` is evo's own).
+
+    ``evo.evaluation.evaluate`` takes one, the way it takes a learner: a recorder of
+    another format, or one that wraps evo's (to also send the curve elsewhere), is an
+    opener of this signature. It is called inside a critical section
+    (``evo.interrupt.critical``), so a signal waits until the recorder it returns is
+    in the evaluation's hands.
+    """
+
+    def __call__(
+        self,
+        config: RecordConfig,
+        directory: str | Path,
+        name: str,
+        model: mujoco.MjModel,
+        metadata: Mapping[str, Any],
+    ) -> Recorder: ...
 
 
 def open_recorder(

@@ -7,7 +7,7 @@ of times, then raise ``OperatorError`` with what they tried.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -349,7 +349,16 @@ def crossover(
 
 # --- mutation (an extension, off in the paper configs) -----------------------------------
 
-Mutation = Callable[[Robot, np.random.Generator, GeneratorParams], Robot | None]
+
+@dataclass(frozen=True, slots=True)
+class Mutation:
+    """A mutation operator: ``ga.mutation_operators`` names each one an offspring may get
+    with ``_target_``. A subclass's ``__call__`` returns the changed robot (not yet
+    checked for validity), or None when this robot offers it nothing to change."""
+
+    def __call__(self, robot: Robot, rng: np.random.Generator,
+                 params: GeneratorParams) -> Robot | None:
+        raise NotImplementedError(f"{type(self).__name__} changes nothing")
 
 
 def _body_nodes(robot: Robot, with_root: bool) -> list[Placed]:
@@ -360,85 +369,103 @@ def _body_nodes(robot: Robot, with_root: bool) -> list[Placed]:
     ]
 
 
-def add_subtree(robot: Robot, rng: np.random.Generator, params: GeneratorParams) -> Robot | None:
+@dataclass(frozen=True, slots=True)
+class AddSubtree(Mutation):
     """Grow a random subtree on a free face of a random module."""
-    placed = robot.modules()
-    occupied = {p.cell for p in placed}
-    options = [
-        (p, face)
-        for p in placed
-        if p.node.type is not ModuleType.WHEEL
-        for face in free_faces(p.node.type, p.parent is None)
-        if p.node.child_on(face) is None
-    ]
-    if not options:
-        return None
-    host, face = options[rng.integers(len(options))]
-    always = GeneratorParams(params.max_depth, 0.0, params.p_passive_wheels, params.type_weights)
-    edge = _Grower(rng, always, occupied).attach(host.cell, host.frame, face, host.depth)
-    if edge is None:
-        return None
-    return Robot(
-        replace_node(robot.root, host.path, Node(host.node.type, host.node.children + (edge,)))
-    )
+
+    def __call__(self, robot: Robot, rng: np.random.Generator,
+                 params: GeneratorParams) -> Robot | None:
+        placed = robot.modules()
+        occupied = {p.cell for p in placed}
+        options = [
+            (p, face)
+            for p in placed
+            if p.node.type is not ModuleType.WHEEL
+            for face in free_faces(p.node.type, p.parent is None)
+            if p.node.child_on(face) is None
+        ]
+        if not options:
+            return None
+        host, face = options[rng.integers(len(options))]
+        always = GeneratorParams(params.max_depth, 0.0, params.p_passive_wheels,
+                                 params.type_weights)
+        edge = _Grower(rng, always, occupied).attach(host.cell, host.frame, face, host.depth)
+        if edge is None:
+            return None
+        return Robot(
+            replace_node(robot.root, host.path, Node(host.node.type, host.node.children + (edge,)))
+        )
 
 
-def remove_subtree(robot: Robot, rng: np.random.Generator, params: GeneratorParams) -> Robot | None:
+@dataclass(frozen=True, slots=True)
+class RemoveSubtree(Mutation):
     """Remove a random non-root module with everything below it."""
-    options = _body_nodes(robot, with_root=False)
-    if not options:
-        return None
-    victim = options[rng.integers(len(options))]
-    return Robot(replace_at(robot.root, victim.path, None))
+
+    def __call__(self, robot: Robot, rng: np.random.Generator,
+                 params: GeneratorParams) -> Robot | None:
+        options = _body_nodes(robot, with_root=False)
+        if not options:
+            return None
+        victim = options[rng.integers(len(options))]
+        return Robot(replace_at(robot.root, victim.path, None))
 
 
-def rotate_edge(robot: Robot, rng: np.random.Generator, params: GeneratorParams) -> Robot | None:
+@dataclass(frozen=True, slots=True)
+class RotateEdge(Mutation):
     """Turn a random non-wheel module to another rotation about its connection axis."""
-    options = _body_nodes(robot, with_root=False)
-    if not options:
-        return None
-    target = options[rng.integers(len(options))]
-    edge = subtree_at(robot.root, target.path)
-    rotations = [r for r in ROTATIONS if r != edge.rotation]
-    rotation = rotations[rng.integers(len(rotations))]
-    return Robot(replace_at(robot.root, target.path, Edge(edge.face, rotation, edge.module)))
+
+    def __call__(self, robot: Robot, rng: np.random.Generator,
+                 params: GeneratorParams) -> Robot | None:
+        options = _body_nodes(robot, with_root=False)
+        if not options:
+            return None
+        target = options[rng.integers(len(options))]
+        edge = subtree_at(robot.root, target.path)
+        rotations = [r for r in ROTATIONS if r != edge.rotation]
+        rotation = rotations[rng.integers(len(rotations))]
+        return Robot(replace_at(robot.root, target.path, Edge(edge.face, rotation, edge.module)))
 
 
-def change_type(robot: Robot, rng: np.random.Generator, params: GeneratorParams) -> Robot | None:
+@dataclass(frozen=True, slots=True)
+class ChangeType(Mutation):
     """Change a random non-root module into another body type, adapting its children.
 
     A new motor gets a fresh wheel pair instead of its children; a new pivot keeps only
     its face-0 child; a new main keeps every child (a motor's wheels become passive).
     """
-    options = _body_nodes(robot, with_root=False)
-    if not options:
-        return None
-    target = options[rng.integers(len(options))]
-    kinds = [t for t in BODY_TYPES if t is not target.node.type]
-    kind = kinds[rng.integers(len(kinds))]
-    old = target.node.children
-    if kind is ModuleType.MOTOR:
-        children = tuple(Edge(f, 0, _WHEEL) for f in MOTOR_WHEEL_FACES)
-    elif kind is ModuleType.PIVOT:
-        children = tuple(e for e in old if e.face == DISTAL_FACE)
-    else:
-        children = old
-    return Robot(replace_node(robot.root, target.path, Node(kind, children)))
+
+    def __call__(self, robot: Robot, rng: np.random.Generator,
+                 params: GeneratorParams) -> Robot | None:
+        options = _body_nodes(robot, with_root=False)
+        if not options:
+            return None
+        target = options[rng.integers(len(options))]
+        kinds = [t for t in BODY_TYPES if t is not target.node.type]
+        kind = kinds[rng.integers(len(kinds))]
+        old = target.node.children
+        if kind is ModuleType.MOTOR:
+            children = tuple(Edge(f, 0, _WHEEL) for f in MOTOR_WHEEL_FACES)
+        elif kind is ModuleType.PIVOT:
+            children = tuple(e for e in old if e.face == DISTAL_FACE)
+        else:
+            children = old
+        return Robot(replace_node(robot.root, target.path, Node(kind, children)))
 
 
 MUTATIONS: dict[str, Mutation] = {
-    "add_subtree": add_subtree,
-    "remove_subtree": remove_subtree,
-    "rotate_edge": rotate_edge,
-    "change_type": change_type,
+    "add_subtree": AddSubtree(),
+    "remove_subtree": RemoveSubtree(),
+    "rotate_edge": RotateEdge(),
+    "change_type": ChangeType(),
 }
-"""The mutation operators by name."""
+"""Every mutation operator, by the name ``ga.mutation_operators`` may also give it
+(the shorthand of older configs and the command line, :func:`evo.config.current`)."""
 
 
 def mutate(
     robot: Robot,
     rng: np.random.Generator,
-    operators: tuple[str, ...] = tuple(MUTATIONS),
+    operators: Sequence[Mutation] = tuple(MUTATIONS.values()),
     params: GeneratorParams | None = None,
     limits: Limits | None = None,
     max_tries: int = 100,
@@ -447,14 +474,14 @@ def mutate(
 
     Raises:
         OperatorError: ``max_tries`` attempts gave no valid, changed robot.
-        KeyError: an unknown operator name.
+        ValueError: no operators to choose from.
     """
     params = params or GeneratorParams()
-    unknown = [op for op in operators if op not in MUTATIONS]
-    if unknown or not operators:
-        raise KeyError(f"unknown mutation operators {unknown}; expected some of {list(MUTATIONS)}")
+    if not operators:
+        raise ValueError(f"no mutation operators to choose from; expected some of "
+                         f"{list(MUTATIONS)}")
     for _ in range(max_tries):
-        op = MUTATIONS[operators[rng.integers(len(operators))]]
+        op = operators[int(rng.integers(len(operators)))]
         child = op(robot, rng, params)
         if child is not None and child != robot and is_valid(child.root, limits):
             return child

@@ -4,8 +4,10 @@ The whole state (population, history, breeding RNG, next birth, robots in flight
 ``state.json``, written atomically after every submission and every result, before the
 files derived from it (``history.csv``, ``population.json``, ``summary.json``).
 :meth:`RunStore.load` reads it back and checks it against the files it refers to,
-writing nothing. The evolution loop is given a store (``evo.evolution.Evolution``); a
-test that needs a store which fails at a chosen moment passes a subclass.
+writing nothing. The evolution loop is given a store (``evo.evolution.Evolution``), and
+``python evo/main.py`` makes it through ``evo.main.EvolveCode``: a store that also keeps
+its files elsewhere, or one that fails at a chosen write (as the fault tests do), is a
+subclass that overrides ``save_robot``, ``write_json`` or ``write_history``.
 """
 
 from __future__ import annotations
@@ -106,13 +108,17 @@ class RunStore:
             "wall_seconds": state.wall_seconds,
         })
         if state.history:
-            write_history(self.layout.history, state.history)
+            self.write_history(state.history)
         self.write_json(self.layout.population, {"population": population})
         write_run_summary(self.layout.summary, summary)
 
     def write_json(self, path: Path, data: dict[str, Any]) -> Path:
         """Write one of the run's JSON files atomically (``evo.run.files.write_json``)."""
         return files.write_json(path, data)
+
+    def write_history(self, rows: list[HistoryRow]) -> Path:
+        """Write ``history.csv`` atomically (``evo.run.records.write_history``)."""
+        return write_history(self.layout.history, rows)
 
     def load(self) -> SavedState:
         """Read and check ``state.json`` and the files it refers to, writing nothing.
