@@ -331,7 +331,8 @@ def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, f
 def run_retrain(cfg: DictConfig, out: Path, lock: RunLock) -> None:
     """Train fixed structures under independent seeds and write their noise ceiling
     (``+exp=retrain``, ``analysis.noise_ceiling``); ``resume=DIR`` continues, reusing
-    the finished trainings (so does the same command run again)."""
+    the finished trainings (so does the same command run again). ``config.yaml`` is
+    written once the folder is known to hold no noise ceiling of other settings."""
     from analysis.noise_ceiling import NoiseCeilingError, run
     from evo.retrain import RetrainConfig, stored_settings
 
@@ -345,7 +346,8 @@ def run_retrain(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                      else trial_overrides())
         report = run(cfg, out, config, root_seed=check_seed(cfg), overrides=overrides,
                      command="python evo/main.py " + " ".join(overrides),
-                     on_ready=lock.claim if resuming else None)
+                     on_ready=lock.claim if resuming else functools.partial(
+                         _write_config, cfg, out, lock))
     except NoiseCeilingError as err:
         raise ConfigError(str(err)) from None
     print(f"report: {report}")
@@ -390,7 +392,8 @@ def main(cfg: DictConfig, code: EvolveCode = EVO_CODE) -> object:
             if cfg.resume is None:
                 check_seed(cfg)
                 cfg = current(cfg)  # config.yaml holds today's form (ga.structure=R too)
-                _write_config(cfg, out, lock)
+                if task is not run_retrain:  # it writes once its folder is checked
+                    _write_config(cfg, out, lock)
             if task is run_evolve:  # the one task whose code a caller may choose
                 task = functools.partial(run_evolve, code=code)
             return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None

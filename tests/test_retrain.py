@@ -10,7 +10,7 @@ import signal
 import subprocess
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +46,8 @@ def fake_evaluate(candidate: Candidate, job: Job) -> Outcome:
 
 class Deferred:
     """An executor of ``workers`` whose futures finish only when :meth:`finish` runs
-    them, last submitted first: the pool must wait for whichever ends."""
+    them, last submitted first: the pool must wait for whichever ends. A submission that
+    fills the last free worker finishes the newest at once, as the pool is about to wait."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
@@ -56,6 +57,8 @@ class Deferred:
     def submit(self, fn: Callable[..., Any], /, *args: Any) -> Future[Any]:
         future: Future[Any] = Future()
         self.queue.append((future, fn, args))
+        if len(self.queue) == self.workers:
+            self.finish()
         return future
 
     def finish(self) -> None:
@@ -79,23 +82,8 @@ def candidates(n: int) -> list[Candidate]:
     return [Candidate(b, f"robot-{b}", "{}", 64, b) for b in range(n)]
 
 
-def finishing(executor: Deferred) -> Callable[..., tuple[set[Future[Any]], set[Any]]]:
-    """``concurrent.futures.wait`` for the pool, which first lets ``executor`` finish one."""
-
-    def finishing_wait(fs: Any, return_when: str) -> tuple[set[Future[Any]], set[Any]]:
-        assert return_when == FIRST_COMPLETED
-        executor.finish()
-        done, _ = wait(fs, timeout=0)
-        return set(done), set()
-
-    return finishing_wait
-
-
-def test_the_pool_keeps_the_workers_busy_and_hands_back_outcomes_as_they_finish(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+def test_the_pool_keeps_the_workers_busy_and_hands_back_outcomes_as_they_finish() -> None:
     executor = Deferred(workers=2)
-    monkeypatch.setattr("evo.pool.wait", finishing(executor))
     job = Job.__new__(Job)  # never looked at by fake_evaluate
     todo = candidates(5)
     seen_running: list[list[str]] = []
@@ -103,7 +91,11 @@ def test_the_pool_keeps_the_workers_busy_and_hands_back_outcomes_as_they_finish(
 
     def next_candidate(running: Sequence[Candidate]) -> tuple[Candidate, Job] | None:
         seen_running.append([c.name for c in running])
-        return (todo.pop(0), job) if todo else None
+        if todo:
+            return todo.pop(0), job
+        if executor.queue:  # none to add: the pool waits for those in flight
+            executor.finish()
+        return None
 
     def on_outcome(candidate: Candidate, outcome: Outcome) -> None:
         assert candidate.name == outcome.name
@@ -121,9 +113,8 @@ def test_the_pool_keeps_the_workers_busy_and_hands_back_outcomes_as_they_finish(
     assert executor.calls == ["shutdown"]
 
 
-def test_the_pool_stops_its_workers_when_interrupted(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_pool_stops_its_workers_when_interrupted() -> None:
     executor = Deferred(workers=2)
-    monkeypatch.setattr("evo.pool.wait", finishing(executor))
     todo = candidates(3)
 
     def on_outcome(candidate: Candidate, outcome: Outcome) -> None:
@@ -203,6 +194,20 @@ def test_a_resumed_retrain_reuses_the_finished_trainings(retrained: Path,
     assert summary["metrics"] == json.loads((retrained / "summary.json").read_text())["metrics"]
     assert json.loads((stopped / nc.SETTINGS).read_text())["overrides"] == json.loads(
         (retrained / nc.SETTINGS).read_text())["overrides"], "the settings it was started with"
+
+
+def test_other_settings_in_a_retrain_folder_are_refused_and_change_nothing(
+    retrained: Path, tmp_path: Path,
+) -> None:
+    folder = tmp_path / "ceiling"
+    shutil.copytree(retrained, folder)
+    before = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    done = run(retrain_cmd(folder, retrained.parent / "robots", "noise_ceiling.budget=256"),
+               tmp_path)
+    assert done.returncode == 2, done.stderr[-3000:]
+    assert "holds a noise ceiling with other settings (budget differ" in done.stderr, done.stderr
+    after = {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    assert after == before, "config.yaml and the rest as they were"
 
 
 def test_the_older_command_line_gives_the_same_files(retrained: Path, tmp_path: Path) -> None:
