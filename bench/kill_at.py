@@ -30,14 +30,13 @@ import signal
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from types import TracebackType
-from typing import TYPE_CHECKING, Any, NoReturn, Self
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from evo.evaluation import evaluate
 from evo.evolution import RunLog
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
-from evo.record import Episode, RecordConfig, Recorder, open_recorder
+from evo.record import Episode, RecordConfig, Recorder, WrappedRecorder, open_recorder
 from evo.run.records import HistoryRow
 from evo.run.store import RunStore
 
@@ -114,12 +113,13 @@ class DyingStore(RunStore):
         return path
 
 
-class DyingRecorder:
+class DyingRecorder(WrappedRecorder):
     """An evaluation's recorder, killed just after the k-th curve row (``evaluation``) or
     with the k-th episode written, not flushed (``recording``)."""
 
     def __init__(self, inner: Recorder, killer: Killer) -> None:
-        self.inner, self.killer = inner, killer
+        super().__init__(inner)
+        self.killer = killer
 
     def curve(self, row: Mapping[str, float]) -> None:
         self.inner.curve(row)
@@ -130,17 +130,6 @@ class DyingRecorder:
         self.inner.episode(episode)
         if self.killer.hit("recording"):
             die()
-
-    def close(self, summary: Mapping[str, Any]) -> None:
-        self.inner.close(summary)
-
-    def __enter__(self) -> Self:
-        self.inner.__enter__()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.inner.__exit__(exc_type, exc, tb)
 
 
 class DyingLog(RunLog):

@@ -20,13 +20,19 @@ import signal
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from types import TracebackType
-from typing import TYPE_CHECKING, Any, Self
+from typing import TYPE_CHECKING, Any
 
 from evo.evaluation import evaluate
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
-from evo.record import Episode, RecordConfig, Recorder, Recorders, open_recorder
+from evo.record import (
+    Episode,
+    RecordConfig,
+    Recorder,
+    Recorders,
+    WrappedRecorder,
+    open_recorder,
+)
 from evo.record.mcap_file import McapRecorder
 from evo.record.rrd import RerunRecorder
 from evo.robot.tree import Robot
@@ -111,15 +117,13 @@ class FillingStore(RunStore):
         return super().save_robot(name, robot)
 
 
-class FillingRecorder:
+class FillingRecorder(WrappedRecorder):
     """One file's recorder of an evaluation: an MCAP episode (``mcap``) or the closing
     of a rerun file (``rrd``) is written after :meth:`Disk.fill`."""
 
     def __init__(self, inner: Recorder, disk: Disk) -> None:
-        self.inner, self.disk = inner, disk
-
-    def curve(self, row: Mapping[str, float]) -> None:
-        self.inner.curve(row)
+        super().__init__(inner)
+        self.disk = disk
 
     def episode(self, episode: Episode) -> None:
         if isinstance(self.inner, McapRecorder):
@@ -130,14 +134,6 @@ class FillingRecorder:
         if isinstance(self.inner, RerunRecorder) and not self.inner.closed:
             self.disk.fill("rrd")
         self.inner.close(summary)
-
-    def __enter__(self) -> Self:
-        self.inner.__enter__()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        self.inner.__exit__(exc_type, exc, tb)
 
 
 def main() -> None:

@@ -18,7 +18,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from evo.episode import Episode
-from evo.record.base import NullRecorder, Recorder, Recorders
+from evo.record.base import NullRecorder, Recorder, Recorders, WrappedRecorder
 from evo.record.config import (
     EpisodeChoice,
     OpenRecorder,
@@ -72,6 +72,7 @@ __all__ = [
     "Recorders",
     "RerunRecorder",
     "RunRecorder",
+    "WrappedRecorder",
     "is_complete",
     "open_recorder",
     "read_births",

@@ -96,6 +96,31 @@ class Recorder(Protocol):
     ) -> None: ...
 
 
+class WrappedRecorder:
+    """A recorder that passes every call on to ``inner``: subclass it to act around one
+    call (count rows, stop at an episode) and leave the others as they are."""
+
+    def __init__(self, inner: Recorder) -> None:
+        self.inner = inner
+
+    def curve(self, row: Mapping[str, float]) -> None:
+        self.inner.curve(row)
+
+    def episode(self, episode: Episode) -> None:
+        self.inner.episode(episode)
+
+    def close(self, summary: Mapping[str, Any]) -> None:
+        self.inner.close(summary)
+
+    def __enter__(self) -> Self:
+        self.inner.__enter__()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.inner.__exit__(exc_type, exc, tb)
+
+
 class RecorderBase:
     """Context-manager behaviour and the ``closed`` flag shared by the recorders.
 

@@ -369,6 +369,12 @@ def _body_nodes(robot: Robot, with_root: bool) -> list[Placed]:
     ]
 
 
+def _random_body_node(robot: Robot, rng: np.random.Generator) -> Placed | None:
+    """A non-root, non-wheel module drawn uniformly (one draw), or None when there is none."""
+    options = _body_nodes(robot, with_root=False)
+    return options[rng.integers(len(options))] if options else None
+
+
 @dataclass(frozen=True, slots=True)
 class AddSubtree(Mutation):
     """Grow a random subtree on a free face of a random module."""
@@ -403,10 +409,9 @@ class RemoveSubtree(Mutation):
 
     def __call__(self, robot: Robot, rng: np.random.Generator,
                  params: GeneratorParams) -> Robot | None:
-        options = _body_nodes(robot, with_root=False)
-        if not options:
+        victim = _random_body_node(robot, rng)
+        if victim is None:
             return None
-        victim = options[rng.integers(len(options))]
         return Robot(replace_at(robot.root, victim.path, None))
 
 
@@ -416,10 +421,9 @@ class RotateEdge(Mutation):
 
     def __call__(self, robot: Robot, rng: np.random.Generator,
                  params: GeneratorParams) -> Robot | None:
-        options = _body_nodes(robot, with_root=False)
-        if not options:
+        target = _random_body_node(robot, rng)
+        if target is None:
             return None
-        target = options[rng.integers(len(options))]
         edge = subtree_at(robot.root, target.path)
         rotations = [r for r in ROTATIONS if r != edge.rotation]
         rotation = rotations[rng.integers(len(rotations))]
@@ -436,10 +440,9 @@ class ChangeType(Mutation):
 
     def __call__(self, robot: Robot, rng: np.random.Generator,
                  params: GeneratorParams) -> Robot | None:
-        options = _body_nodes(robot, with_root=False)
-        if not options:
+        target = _random_body_node(robot, rng)
+        if target is None:
             return None
-        target = options[rng.integers(len(options))]
         kinds = [t for t in BODY_TYPES if t is not target.node.type]
         kind = kinds[rng.integers(len(kinds))]
         old = target.node.children
