@@ -28,6 +28,7 @@ import pandas as pd
 from analysis import noise_ceiling as nc
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.plots import plot_noise_study
+from evo.run.layout import RetrainLayout
 
 SETTINGS: dict[str, tuple[str, ...]] = {
     # The paper's learner (ML-Agents' 12 areas, 128-step rollouts) and episodes of
@@ -89,7 +90,7 @@ def study_table(folders: Sequence[Path]) -> pd.DataFrame:
     """One row per finished cell and estimator: settings, budget, metrics, speed."""
     rows = []
     for folder in folders:
-        path = folder / "summary.json"
+        path = RetrainLayout(folder).summary
         if not path.is_file():
             continue
         summary = json.loads(path.read_text())

@@ -144,6 +144,7 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     from evo.edge import executor_of, retraining
     from evo.pool import EvaluationPool
     from evo.retrain import RetrainConfig, RetrainError, run_trainings, wall_seconds
+    from evo.run.layout import RetrainLayout
 
     sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
     config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
@@ -160,7 +161,7 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     command = "python evo/main.py " + " ".join(overrides)
     write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
                  command=command, resampling=Resampling.seeded(0, sweep.resamples))
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads(RetrainLayout(out).summary.read_text())
     metrics = summary["metrics"]["fitness"]
     result = TrialResult(
         objective=sweep.objective, value=float(metrics[sweep.objective]),
