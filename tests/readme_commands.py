@@ -156,6 +156,8 @@ class How:
         group: ``"main"`` (tests/test_readme.py, around the smoke run) or ``"analysis"``
             (tests/test_analysis_report.py, around the ablation it shares with the
             analysis tests).
+        long: A variant of a command the default tier already runs (other options of
+            the same script): it runs in the long tier (``pytest -m long``).
     """
 
     append: str = ""
@@ -165,6 +167,7 @@ class How:
     says: str = ""
     makes_run: str = ""
     group: str = "main"
+    long: bool = False
 
 
 THROUGHPUT = ("env.task.t_max=50 --steps 256 --robots robots/four_wheeler.json "
@@ -216,10 +219,11 @@ HOW: dict[str, How] = {
         append="--steps 20 --robots robots/four_wheeler.json --num-envs 12 --nthread 1 "
                "--arenas clean --repeats 1"),
     "python bench/train_throughput.py": How(append=SMALL_THROUGHPUT),
-    "python bench/train_throughput.py --profile": How(append=SMALL_THROUGHPUT),
-    "python bench/train_throughput.py --steps 150000 --quality": How(append=SMALL_THROUGHPUT),
+    "python bench/train_throughput.py --profile": How(append=SMALL_THROUGHPUT, long=True),
+    "python bench/train_throughput.py --steps 150000 --quality": How(append=SMALL_THROUGHPUT,
+                                                                    long=True),
     "python bench/train_throughput.py learner.num_envs=32 learner.rollout_steps=64": How(
-        append=THROUGHPUT),
+        append=THROUGHPUT, long=True),
     "python bench/ppo_floor.py": How(
         append="--repeats 1 learner.num_envs=4 learner.rollout_steps=64 "
                "learner.minibatch_size=128"),

@@ -73,7 +73,9 @@ def test_one_robot_is_trained_and_evaluated(made: Made) -> None:
     assert evaluation["episodes"] == 2 and 0 <= evaluation["success_rate"] <= 1
 
 
-@pytest.mark.parametrize("command", group("main"), ids=lambda c: c.text)
+@pytest.mark.parametrize("command", [
+    pytest.param(c, marks=pytest.mark.long) if how(c).long else c for c in group("main")
+], ids=lambda c: c.text)
 def test_the_readme_command_works_as_written(made: Made, command: Command) -> None:
     run(command, made.root, made)
 
