@@ -227,8 +227,9 @@ def verdict(executor: str, samples: list[Sample]) -> str:
     workers = growth(samples, lambda s: sum(s.workers))
     worst = max((g for g in (main, workers) if g == g), default=float("nan"))
     mark = "ok" if worst <= GROWTH_GOAL else f"OVER the {GROWTH_GOAL:.0%} goal"
+    others = f"workers {workers:+.1%}" if workers == workers else "no worker processes"
     return (f"{executor}: after the first {samples[0].done} evaluations RSS grew "
-            f"main {main:+.1%}, workers {workers:+.1%} over the rest ({mark})")
+            f"main {main:+.1%}, {others} over the rest ({mark})")
 
 
 def parse() -> argparse.Namespace:
