@@ -224,7 +224,8 @@ def test_one_robot_training_leaves_room_for_failed_episodes(hydra_conf: None) ->
         warn_if_failures_cannot_end(100_000, "learner.total_steps", learner, env)
 
 
-@pytest.mark.parametrize("experiment", ["ablation", "ablation_paper", "ablation_smoke"])
+@pytest.mark.parametrize(
+    "experiment", ["ablation", "ablation_100k", "ablation_paper", "ablation_smoke"])
 def test_ablation_is_a_multirun_of_the_four_methods(
     hydra_conf: None, tmp_path: Path, experiment: str
 ) -> None:
@@ -246,9 +247,17 @@ def test_ablation_is_a_multirun_of_the_four_methods(
         if experiment == "ablation_paper":  # the paper's regime, exactly
             assert budgets == {30_000} and 90 <= parts.ga.robot_budget <= 110
             assert (parts.job.learner.num_envs, parts.job.learner.rollout_steps) == (12, 128)
-        if experiment == "ablation":  # the regime docs/results/fitness_noise.md supports
+        if experiment == "ablation_100k":  # the regime docs/results/fitness_noise.md chose
             assert budgets == {100_000} and parts.ga.robot_budget == 100
             assert (parts.job.learner.num_envs, parts.job.learner.rollout_steps) == (32, 64)
+        if experiment == "ablation":  # the noise sweep's regime (docs/results/noise_sweep/)
+            learner, physics = parts.job.learner, parts.job.physics
+            assert budgets == {50_000} and parts.ga.robot_budget == 100
+            assert (learner.num_envs, learner.rollout_steps, learner.minibatch_size) == (
+                32, 64, 1024)
+            assert (learner.lmbda, learner.entropy_coeff, learner.init_log_std) == (
+                0.8, 0.0, -1.0) and learner.reward_scaling
+            assert (physics.timestep, parts.job.env.task.frame_skip) == (0.00625, 8)
     assert labels == METHODS
     # More seeds are a command-line choice (seed=0,1,2 there; quoted in the compose API).
     more = compose(

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0, 1, 2): every
+# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0-4): every
 # unfinished run at once, one process each (executor=serial), sharing the machine's
 # cores, so that all seeds grow together and a report over each run's first N robots
 # (--first N) can be made before the end. Resumable: rerun it to continue every
@@ -22,7 +22,7 @@ one() {
   MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/ablation_${name}_seed$seed.log" 2>&1
 }
 mkdir -p runs
-for seed in ${SEEDS:-0 1 2}; do
+for seed in ${SEEDS:-0 1 2 3 4}; do
   for spec in "E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"; do
     # shellcheck disable=SC2086
     one $spec "$seed" &
