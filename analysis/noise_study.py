@@ -58,6 +58,12 @@ SETTINGS: dict[str, tuple[str, ...]] = {
     "ep8": ("learner.epochs=8",),
     # The learner defaults with a slower learner: Adam 1e-4.
     "lr1e-4": ("learner.lr=1e-4",),
+    # The noise sweep's best (trial 2 of +exp=noise_sweep, docs/results/noise_sweep/), what
+    # +exp=ablation uses: GAE lambda 0.8, minibatches of 1,024, no entropy bonus, initial
+    # log std -1, reward scaling, 6.25 ms x 8 physics.
+    "sweep": ("learner.lmbda=0.8", "learner.minibatch_size=1024", "learner.entropy_coeff=0",
+              "learner.init_log_std=-1", "learner.reward_scaling=true",
+              "physics_step=dt6p25ms_x8"),
 }
 """Named settings: config overrides on top of the defaults (``record=off`` is added)."""
 
