@@ -12,6 +12,7 @@ training can be replayed later from the checkpoint alone.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict
 
 import torch
 
@@ -52,6 +53,14 @@ def play(
     return core, played
 
 
+class PolicyEvaluationJSON(TypedDict):
+    """A :class:`PolicyEvaluation` as ``summary.json`` holds it."""
+
+    success_rate: float
+    mean_return: float
+    returns: list[float]
+
+
 @dataclass(frozen=True, slots=True)
 class PolicyEvaluation:
     """The outcome of ``evaluate_policy``.
@@ -66,7 +75,7 @@ class PolicyEvaluation:
     mean_return: float
     returns: tuple[float, ...]
 
-    def summary(self) -> dict[str, float | list[float]]:
+    def summary(self) -> PolicyEvaluationJSON:
         """``success_rate``, ``mean_return`` and the list of ``returns`` (summary.json)."""
         return {"success_rate": self.success_rate, "mean_return": self.mean_return,
                 "returns": list(self.returns)}

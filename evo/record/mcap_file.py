@@ -65,7 +65,7 @@ from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
 from evo.record.rows import encode_metadata, encode_row, json_number, object_schema, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder
-from evo.run.files import full_disk
+from evo.run.files import JSONObject, JSONValue, full_disk
 
 TOPIC_SCENE = "/scene"
 TOPIC_TF = "/tf"
@@ -191,7 +191,7 @@ class McapFile:
                 raise full from err
             raise
 
-    def channel(self, topic: str, schema: foxglove.Schema | dict[str, Any],
+    def channel(self, topic: str, schema: foxglove.Schema | JSONObject,
                 message_encoding: str) -> foxglove.Channel:
         """A channel of this file, released when the file is closed."""
         channel = foxglove.Channel(
@@ -200,7 +200,7 @@ class McapFile:
         self.channels.append(channel)
         return channel
 
-    def json_channel(self, topic: str, schema: Mapping[str, Any]) -> foxglove.Channel:
+    def json_channel(self, topic: str, schema: Mapping[str, JSONValue]) -> foxglove.Channel:
         """A JSON channel with a JSON schema (``title`` names the schema)."""
         return self.channel(topic, dict(schema), "json")
 

@@ -35,6 +35,7 @@ from evo.record.mcap_file import (
     RecordError,
 )
 from evo.record.rows import current_curve_key, decode_metadata, decode_row, from_json_number
+from evo.run.files import JSONObject
 
 
 @dataclass
@@ -103,7 +104,7 @@ def is_complete(path: str | Path) -> bool:
     return _scan(path).complete
 
 
-def read_metadata(path: str | Path) -> dict[str, Any]:
+def read_metadata(path: str | Path) -> JSONObject:
     """The metadata given when recording started, updated with the summary given at
     close (``fitness`` ...; absent when the writer died first).
 
@@ -135,7 +136,7 @@ def read_curve(path: str | Path) -> pd.DataFrame:
     return curve.rename(columns=current_curve_key)
 
 
-def read_json_topic(path: str | Path, topic: str) -> list[dict[str, Any]]:
+def read_json_topic(path: str | Path, topic: str) -> list[JSONObject]:
     """Every JSON message of ``topic`` in file order (as written)."""
     scan = _scan(path, [topic])
     return [json.loads(m.data) for m in scan.messages[topic]]
