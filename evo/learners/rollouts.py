@@ -18,6 +18,7 @@ import torch
 
 from evo.envs.params import EnvConfig
 from evo.envs.reach import make_env
+from evo.envs.scene import Scene
 from evo.envs.task import ReachCore
 from evo.episode import Episode
 from evo.learners.common import Policy
@@ -33,13 +34,16 @@ def play(
     env: EnvConfig,
     seed: int,
     episodes: int = 1,
+    scene: Scene | None = None,
 ) -> tuple[ReachCore, list[Episode]]:
-    """Run ``episodes`` deterministic episodes one after another in one arena.
+    """Run ``episodes`` deterministic episodes one after another in one arena
+    (``scene``: the robot's compiled arena, when the caller has it).
 
     Returns:
         The arena (its ``model`` describes the bodies) and the episodes.
     """
-    core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed)
+    core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed,
+                     scene=scene)
     played: list[Episode] = []
     core.watch(played.append)
     for _ in range(episodes):
