@@ -226,8 +226,7 @@ def _train(
     seed: int,
     on_curve: CurveHook | None,
     on_episode: EpisodeHook | None,
-    inheritance: Inheritance | None = None,
-    scene: Scene | None = None,
+    inheritance: Inheritance | None = None, scene: Scene | None = None,
 ) -> TrainResult:
     start = time.perf_counter()
     env = make_env(robot, physics, env_config, config.num_envs, seed, scene)
