@@ -77,8 +77,8 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
         self._renderer: mujoco.Renderer | None = None
         self._needs_reset = True  # before the first reset and after an episode ends
 
-    # The options and info dicts are dict[str, Any] because gymnasium.Env's signatures
-    # say so (its checker and wrappers call these); their keys are documented above.
+    # The options and info dicts take gymnasium.Env's types (str keys, Any values): its
+    # checker and wrappers call these; their keys are documented above.
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Obs, dict[str, Any]]:
