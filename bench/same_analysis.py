@@ -7,11 +7,12 @@ tree, and compare every file they write.
 The earlier commit is checked out into ``OUT/tree`` (``git worktree``, as
 ``bench/same_behaviour.py`` does) and both sides use this virtualenv. Each command runs
 once per side in a folder of its own (``OUT/before/<name>``, ``OUT/after/<name>``) that
-holds a copy of its inputs, each side's own committed copy (the earlier commit's where
-it has one, e.g. the ablation runs were ``docs/results/ablation/runs`` before they were
-``docs/results/ablation_100k/runs``; the working tree's otherwise), under the same
-relative path, so that paths the outputs name are alike. The commands
-(``docs/results/*/README.md``):
+holds a copy of its inputs under the same relative path, so that paths the outputs name
+are alike. The inputs are the working tree's committed files on both sides (the code is
+compared, not the data, some of which grew since), but for data that moved: the earlier
+side reads its own copy (the ablation runs were ``docs/results/ablation/runs`` before
+they were ``docs/results/ablation_100k/runs``), and a line says whether the two copies
+are identical. The commands (``docs/results/*/README.md``):
 
 * ``report``: ``python -m analysis.report RUNS --history-only --first 60 --out OUT`` on
   the ablation's committed ``history.csv`` and ``summary.json`` copies;
@@ -85,8 +86,9 @@ class Input:
 
     Attributes:
         at: Where the command finds it, relative to its folder.
-        now: Its path in the working tree.
-        before: Its path at the earlier commit, when it was elsewhere.
+        now: Its path in the working tree (what both sides read by default).
+        before: Its path at the earlier commit, when it was elsewhere (the earlier side
+            reads that copy, where the commit has it).
         seed_configs: Give each run directory ``seed<S>`` under it that has no
             ``config.yaml`` one that says ``seed: S`` (the committed copies of the
             early-rejection runs have none, and the equal-cost table reads the GA seed
@@ -173,9 +175,13 @@ def run(command: Command, tree: Path, folder: Path) -> str | None:
     and ``stdout.txt``, and return None, or its error when it failed."""
     folder.mkdir(parents=True)
     for given in command.inputs:
-        earlier = tree / given.before if given.before is not None else tree / given.now
-        place(earlier if earlier.exists() else REPO / given.now, folder / given.at,
-              seed_configs=given.seed_configs)
+        source = REPO / given.now
+        if tree != REPO and given.before is not None and (tree / given.before).exists():
+            source = tree / given.before
+            same = digests(source) == digests(REPO / given.now)
+            print(f"{command.name}: reads {given.before} at the earlier commit, "
+                  f"{'identical to' if same else 'NOT the same files as'} {given.now}")
+        place(source, folder / given.at, seed_configs=given.seed_configs)
     inputs = written(folder)
     done = subprocess.run(command.argv(), cwd=folder, env=tree_env(tree),
                           capture_output=True, text=True, timeout=1800)
