@@ -26,8 +26,10 @@ from analysis.load import (
     EXTRA_ROBOT_COLUMNS,
     RUN_COLUMNS,
     PathsLike,
+    RunConfig,
     RunDirectoryError,
     Runs,
+    as_int,
     find_run_dirs,
     read_config,
     read_history,
@@ -50,8 +52,9 @@ def run_setting(run_dir: Path) -> tuple[int, int]:
     """
     if RunLayout(run_dir).config.is_file():
         config = read_config(run_dir)
-        population = config.get("ga", {}).get("population_size", DEFAULT_POPULATION)
-        return int(config.get("seed", 0)), int(population)
+        seed = 0 if config.seed is None else config.seed
+        population = config.ga.get("population_size", DEFAULT_POPULATION)
+        return as_int(seed), as_int(population)
     match = SEED_IN_NAME.search(run_dir.name)
     if match is None:
         raise RunDirectoryError(f"{run_dir}: no config.yaml and the name does not end in "
@@ -87,7 +90,7 @@ def load_histories(paths: PathsLike, first: int | None = None) -> Runs:
     for run, run_dir in zip(run_ids(dirs), dirs, strict=True):
         seed, population = run_setting(run_dir)
         history = read_history(run_dir)
-        table = robots_of_run(run, run_method(run_dir, history, {}), seed, history)
+        table = robots_of_run(run, run_method(run_dir, history, RunConfig()), seed, history)
         if first is not None:
             kept = table[table["birth"] < first].reset_index(drop=True)
             notes.append(f"run {run}: its first {len(kept)} robots of {len(table)}")

@@ -117,8 +117,7 @@ def method_of(run_dir: Path) -> str:
         RunDirectoryError: If neither says.
     """
     if RunLayout(run_dir).config.is_file():
-        ga = read_config(run_dir).get("ga") or {}
-        mode = ga.get("inheritance") if isinstance(ga, dict) else None
+        mode = read_config(run_dir).ga.get("inheritance")
         if mode is not None:  # YAML reads a bare off as False
             return WITHOUT if mode is False or str(mode) == "off" else WITH
     for prefix, method in NAME_PREFIXES.items():

@@ -40,10 +40,10 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, TypedDict
+from typing import Literal, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -211,8 +211,33 @@ def run_ids(dirs: list[Path]) -> list[str]:
 # ---------------------------------------------------------------- one run
 
 
-def read_config(run_dir: Path) -> dict[str, Any]:
-    """The resolved ``config.yaml`` of a run as plain containers.
+@dataclass(frozen=True)
+class RunConfig:
+    """What analysis reads of a run's ``config.yaml`` (as written, unresolved).
+
+    Attributes:
+        seed: The ``seed`` key as written (None when missing).
+        ga: The ``ga`` group (empty when missing or not a mapping).
+        learner: The ``learner`` group (empty when missing or not a mapping).
+    """
+
+    seed: object = None
+    ga: Mapping[str, object] = field(default_factory=dict)
+    learner: Mapping[str, object] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, document: Mapping[str, object]) -> RunConfig:
+        """The settings of a config document (``config.yaml`` as plain containers)."""
+
+        def group(name: str) -> Mapping[str, object]:
+            node = document.get(name)
+            return {str(k): v for k, v in node.items()} if isinstance(node, dict) else {}
+
+        return cls(seed=document.get("seed"), ga=group("ga"), learner=group("learner"))
+
+
+def read_config(run_dir: Path) -> RunConfig:
+    """The resolved ``config.yaml`` of a run, the settings analysis reads of it.
 
     Raises:
         RunDirectoryError: If the file is missing or not a YAML mapping.
@@ -226,7 +251,7 @@ def read_config(run_dir: Path) -> dict[str, Any]:
         raise RunDirectoryError(f"{path}: not a readable YAML config ({err})") from None
     if not isinstance(config, dict):
         raise RunDirectoryError(f"{path}: expected a YAML mapping")
-    return {str(k): v for k, v in config.items()}
+    return RunConfig.of({str(k): v for k, v in config.items()})
 
 
 def read_history(run_dir: Path) -> pd.DataFrame:
@@ -249,7 +274,7 @@ def read_history(run_dir: Path) -> pd.DataFrame:
     return history
 
 
-def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> str:
+def run_method(run_dir: Path, history: pd.DataFrame, config: RunConfig) -> str:
     """The run's method: history's ``method`` column, else summary.json, else the config.
 
     Raises:
@@ -266,9 +291,8 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: dict[str, Any]) -> 
     summary = _summary(run_dir)
     if summary is not None:
         return summary.method
-    ga, learner = config.get("ga", {}), config.get("learner", {})
-    structure = structure_letter(ga.get("structure", "E"))
-    return f"{structure}+{'L' if learner.get('update', True) else 'R'}"
+    structure = structure_letter(config.ga.get("structure", "E"))
+    return f"{structure}+{'L' if config.learner.get('update', True) else 'R'}"
 
 
 def _summary(run_dir: Path) -> RunSummary | None:
@@ -390,7 +414,7 @@ def load_runs(paths: PathsLike, first: int | None = None) -> Runs:
             notes.append(f"run {run}: {broken} row(s) of {history_path} cut mid-row "
                          "(a copy taken while it was written?) left out")
         method = run_method(run_dir, history, config)
-        seed = _int_setting(config, "seed", run_dir)
+        seed = _seed(config, run_dir)
         table = robots_of_run(run, method, seed, history)
         if first is not None:
             notes.append(_first_note(run, table, first))
@@ -411,7 +435,7 @@ def load_runs(paths: PathsLike, first: int | None = None) -> Runs:
         curves.append(run_curves)
         runs.append(dict(
             run=run, method=method, seed=seed,
-            population_size=config.get("ga", {}).get("population_size"),
+            population_size=config.ga.get("population_size"),
             robots=len(table), **status,
             curves_mcap=int((table["curve_source"] == "mcap").sum()),
             curves_csv=len(csv_names),
@@ -460,12 +484,20 @@ def _status(run_dir: Path, broken: int) -> RunStatus:
     return RunStatus(complete=complete, status="complete" if complete else "partial")
 
 
-def _int_setting(config: dict[str, Any], key: str, run_dir: Path) -> int:
+def as_int(value: object) -> int:
+    """``int(value)`` of a value read from a config (TypeError for one that is neither a
+    number nor text, as ``int`` raises)."""
+    if isinstance(value, int | float | str):
+        return int(value)
+    raise TypeError(f"int() of {type(value).__name__}: {value!r}")
+
+
+def _seed(config: RunConfig, run_dir: Path) -> int:
     try:
-        return int(config[key])
-    except (KeyError, TypeError, ValueError):
+        return as_int(config.seed)
+    except (TypeError, ValueError):
         raise RunDirectoryError(
-            f"{RunLayout(run_dir).config}: needs an integer '{key}', got {config.get(key)!r}"
+            f"{RunLayout(run_dir).config}: needs an integer 'seed', got {config.seed!r}"
         ) from None
 
 

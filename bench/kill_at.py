@@ -37,6 +37,7 @@ from evo.evolution import RunLog
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
 from evo.record import Episode, RecordConfig, Recorder, WrappedRecorder, open_recorder
+from evo.record.run import RunMetadata
 from evo.run.records import HistoryRow
 from evo.run.store import RunStore
 
@@ -97,7 +98,7 @@ class DyingStore(RunStore):
         super().__init__(root)
         self.killer = killer
 
-    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
+    def write_json(self, path: Path, data: Mapping[str, object]) -> Path:
         if path != self.layout.state:
             return super().write_json(path, data)
         if self.killer.hit("state-write"):
@@ -105,9 +106,11 @@ class DyingStore(RunStore):
             path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
             die()
         super().write_json(path, data)
+        history = data["history"]
+        assert isinstance(history, list)  # RunStore.save's state: its rows
         if not data["pending"] and self.killer.hit("between"):
             die()
-        final = not data["pending"] and len(data["history"]) == self.killer.k
+        final = not data["pending"] and len(history) == self.killer.k
         if self.killer.kind == "after-final-state" and final:
             die()
         return path
@@ -136,7 +139,7 @@ class DyingLog(RunLog):
     """The run's log, killed with the k-th birth written to the run's recordings, not
     flushed (``recording``)."""
 
-    def __init__(self, store: RunStore, record: RecordConfig, metadata: dict[str, Any], *,
+    def __init__(self, store: RunStore, record: RecordConfig, metadata: RunMetadata, *,
                  killer: Killer) -> None:
         super().__init__(store, record, metadata)
         self.killer = killer

@@ -20,6 +20,8 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pandas as pd
@@ -34,11 +36,27 @@ RUN = [*KILL_RESUME_RUN, "record=off"]
 crossover included), without recordings."""
 
 
+@contextmanager
+def earlier_tree(rev: str, tree: Path) -> Iterator[Path]:
+    """``rev`` checked out at ``tree`` (``git worktree``), removed again on leaving."""
+    subprocess.run(["git", "worktree", "add", "--detach", "-f", str(tree), rev],
+                   cwd=REPO, check=True, capture_output=True)
+    try:
+        yield tree
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO,
+                       capture_output=True)
+
+
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment that runs ``tree``'s code (its own packages first on the path)."""
+    return {**os.environ, "PYTHONPATH": str(tree), "MUJOCO_GL": "egl"}
+
+
 def run(tree: Path, run_dir: Path, overrides: list[str]) -> None:
     """``python evo/main.py`` of ``tree`` (its own ``evo`` package first on the path)."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "MUJOCO_GL": "egl"}
     done = subprocess.run([sys.executable, str(tree / "evo" / "main.py"), *RUN, *overrides,
-                           f"hydra.run.dir={run_dir}"], cwd=tree, env=env,
+                           f"hydra.run.dir={run_dir}"], cwd=tree, env=tree_env(tree),
                           capture_output=True, text=True, timeout=1800)
     if done.returncode != 0:
         raise SystemExit(f"{tree}: the run failed\n{done.stderr[-3000:]}")
@@ -96,16 +114,10 @@ def main() -> int:
     args = cli.parse_args()
     shutil.rmtree(args.out, ignore_errors=True)
     args.out.mkdir(parents=True)
-    tree = args.out / "tree"
-    subprocess.run(["git", "worktree", "add", "--detach", "-f", str(tree), args.before],
-                   cwd=REPO, check=True, capture_output=True)
-    try:
+    with earlier_tree(args.before, args.out / "tree") as tree:
         run(tree, args.out / "before", args.overrides)
         run(REPO, args.out / "after", args.overrides)
         diffs = compare(args.out / "before", args.out / "after")
-    finally:
-        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=REPO,
-                       capture_output=True)
     print("same behaviour" if not diffs else f"{len(diffs)} difference(s)")
     return 0 if not diffs else 1
 

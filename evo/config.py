@@ -90,7 +90,7 @@ def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -
     """
     if isinstance(node, DictConfig | Mapping) and "_target_" in node:
         return _built(cls, node, key)
-    raw: dict[str, Any] = {}
+    raw: dict[str, object] = {}
     if node is not None:
         plain = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else node
         if not isinstance(plain, Mapping):

@@ -28,7 +28,7 @@ from pathlib import Path
 from evo.components.executors import EvalExecutor, EvaluationLost
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
-from evo.envs.scene import build_scene
+from evo.envs.scene import compile_scene
 from evo.interrupt import critical, raised
 from evo.learners import Learner
 from evo.learners.common import (
@@ -266,7 +266,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
                       save_policy: SavePolicy) -> Outcome:
     layout = RunLayout(Path(job.run_dir))
     layout.evals.mkdir(parents=True, exist_ok=True)
-    model = build_scene(robot, job.physics, job.env.arena, job.env.task).compile()
+    scene = compile_scene(robot, job.physics, job.env.arena, job.env.task)  # the one compile
     metadata = {
         "robot": candidate.robot, "config": job.config_yaml, "seed": candidate.seed,
         "method": job.method, "birth": candidate.birth, "budget": candidate.budget,
@@ -277,7 +277,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
     with ExitStack() as stack:
         with critical():  # a signal here waits until the recorder is on the stack
             recorder = stack.enter_context(
-                open_recorder(job.record, layout.evals, candidate.name, model, metadata))
+                open_recorder(job.record, layout.evals, candidate.name, scene.model, metadata))
 
         def on_curve(row: dict[str, float]) -> bool:
             recorder.curve(row)
@@ -294,12 +294,12 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
             robot, physics=job.physics, env=job.env, config=job.learner, budget=candidate.budget,
             seed=candidate.seed, on_curve=on_curve,
             on_episode=sampler if job.record.enabled else None,
-            start=inheritance(candidate, layout),
+            start=inheritance(candidate, layout), scene=scene,
         )
         sampler.finish()
         if job.record.enabled:  # one deterministic episode, as `evo.replay` re-plays it
             _, (final,) = play(robot, result.policy, physics=job.physics, env=job.env,
-                               seed=candidate.seed)
+                               seed=candidate.seed, scene=scene)
             recorder.episode(dataclasses.replace(final, index=sampler.count,
                                                  env_step=result.env_steps))
         write_csv(layout.curve(candidate.name), result.curve)

@@ -25,8 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -37,11 +36,11 @@ from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.interrupt import critical
 from evo.pool import EvaluationPool
 from evo.record import RecordConfig
-from evo.record.run import Birth, RunRecorder
+from evo.record.run import Birth, RunMetadata, RunRecorder
 from evo.robot.builder import PhysicsParams, build
 from evo.robot.operators import OperatorError
 from evo.run.records import HistoryRow, RunSummary
-from evo.run.store import RunStore, SavedState
+from evo.run.store import RunStore, SavedState, rng_state
 
 RANDOM_FALLBACK = "random-fallback"
 """History ``operator`` of a random robot made because breeding found no valid child."""
@@ -218,7 +217,7 @@ class Evolution:
         """Save the state and the files derived from it (``RunStore.save``)."""
         wall_seconds = self.wall_seconds
         self.store.save(
-            SavedState(self.seed, self.next_birth, dict(self.rng.bit_generator.state),
+            SavedState(self.seed, self.next_birth, rng_state(self.rng),
                        self.population, self.history, self.pending, wall_seconds),
             self._summary(wall_seconds))
 
@@ -259,14 +258,14 @@ class RunLog:
              "status", "inherited_from")
     """The history columns a birth carries beside its fitness and population figures."""
 
-    def __init__(self, store: RunStore, record: RecordConfig, metadata: dict[str, Any]) -> None:
+    def __init__(self, store: RunStore, record: RecordConfig, metadata: RunMetadata) -> None:
         self.store = store
         self.recorder = (RunRecorder(store.root, metadata, mcap=record.mcap, rerun=record.rerun)
                          if record.enabled else None)
 
     def __call__(self, row: HistoryRow) -> None:
         if self.recorder is not None:
-            record = row.record()
+            record: Mapping[str, object] = row.record()
             self.recorder.birth(Birth(
                 row.birth, row.name, row.fitness, row.accepted, row.population_best,
                 row.population_mean, extra={k: record[k] for k in self.EXTRA},

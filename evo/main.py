@@ -31,7 +31,6 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import hydra
 import numpy as np
@@ -56,6 +55,7 @@ from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.record import RecordConfig
+from evo.record.run import RunMetadata
 from evo.robot import (
     InvalidRobotError,
     Robot,
@@ -189,7 +189,7 @@ class EvolveCode:
 
     store: Callable[[Path], RunStore] = RunStore
     evaluate: Callable[[Candidate, Job], Outcome] = evaluate
-    run_log: Callable[[RunStore, RecordConfig, dict[str, Any]], RunLog] = RunLog
+    run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog
 
 
 EVO_CODE = EvolveCode()

@@ -141,7 +141,11 @@ def recorded_seed(run_dir: Path, name: str | None) -> int:
         return 0
     from evo.record import read_metadata
 
-    return int(read_metadata(RunLayout(run_dir).mcap(name)).get("replay_seed", 0))
+    path = RunLayout(run_dir).mcap(name)
+    seed = read_metadata(path).get("replay_seed", 0)
+    if not isinstance(seed, int | float | str):
+        raise ValueError(f"{path}: replay_seed {seed!r} is not a number")
+    return int(seed)
 
 
 def replay(

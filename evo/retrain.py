@@ -22,10 +22,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import TypedDict, cast
 
 import numpy as np
 import pandas as pd
@@ -171,6 +171,18 @@ def load_structures(robots: Path | None, random_count: int | None, seed: int, *,
 # ---------------------------------------------------------------- the folder
 
 
+class SettingsJSON(TypedDict):
+    """:class:`Settings` as ``settings.json`` holds it (tuples as lists once read)."""
+
+    overrides: Sequence[str]
+    budget: int
+    seeds: int
+    root_seed: int
+    baseline: bool
+    structures: Sequence[str]
+    config: str
+
+
 @dataclass(frozen=True)
 class Settings:
     """What decides a noise ceiling's numbers (stored in ``settings.json``)."""
@@ -183,15 +195,15 @@ class Settings:
     structures: tuple[str, ...]
     config: str  # the resolved config without the executor group
 
-    def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+    def to_json(self) -> SettingsJSON:
+        return cast(SettingsJSON, dataclasses.asdict(self))
 
     COMPARED = ("budget", "seeds", "root_seed", "baseline", "structures", "config")
     """What must match to continue a folder (the overrides may differ, e.g. the
     executor, as long as the resolved config without it is the same)."""
 
 
-def stored_settings(out: Path) -> dict[str, Any] | None:
+def stored_settings(out: Path) -> SettingsJSON | None:
     """``settings.json`` of the folder ``out`` as stored, or None when it has none.
 
     Raises:
@@ -205,7 +217,7 @@ def stored_settings(out: Path) -> dict[str, Any] | None:
     except json.JSONDecodeError as err:
         raise RetrainError(f"{path}: unreadable ({err})") from None
     assert isinstance(stored, dict)
-    return stored
+    return cast(SettingsJSON, stored)
 
 
 WhatTrains = Callable[[str], object]
@@ -215,10 +227,10 @@ training's result (``evo.edge.what_trains``): two configs alike there train alik
 
 def _check_settings(out: Path, settings: Settings, what_trains: WhatTrains) -> None:
     """Refuse an output folder that holds a noise ceiling of other settings."""
-    stored = stored_settings(out)
+    stored: Mapping[str, object] | None = stored_settings(out)  # as read: keys may lack
     if stored is None:
         return
-    mine = settings.to_json()
+    mine: Mapping[str, object] = settings.to_json()
     differ = [k for k in Settings.COMPARED if k != "config"
               and json.dumps(stored.get(k)) != json.dumps(mine[k])]
     if what_trains(str(stored.get("config"))) != what_trains(settings.config):

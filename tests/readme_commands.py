@@ -113,6 +113,9 @@ EXCLUDED: dict[str, str] = {
     "python bench/same_behaviour.py --before REV":
         "checks out another commit (git worktree, needs the history) and runs the "
         "evolution on both",
+    "python bench/same_analysis.py --before REV":
+        "checks out another commit (git worktree, needs the history) and runs the "
+        "analysis commands of docs/results on both (minutes)",
     "python evo/main.py +exp=noise_sweep":
         "30 noise-ceiling trials of 32 trainings each (hours); test_noise_sweep runs the same "
         "config end to end with two tiny trials, and a rerun that continues it",

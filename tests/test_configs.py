@@ -327,14 +327,14 @@ def test_the_shorthands_stand_for_their_classes(hydra_conf: None, tmp_path: Path
 def test_a_runs_method_comes_from_either_form_of_its_config(
     hydra_conf: None, tmp_path: Path
 ) -> None:
-    from analysis.load import run_method
+    from analysis.load import RunConfig, run_method
 
     today = OmegaConf.to_container(current(compose(
         "config", overrides=["ga/structure=random", "learner=random"])), resolve=True)
     old = {"ga": {"structure": "R"}, "learner": {"name": "random", "update": False}}
     for config in (today, old):  # a run directory without history or summary
         assert isinstance(config, dict)
-        assert run_method(tmp_path, pd.DataFrame(), config) == "R+R", config
+        assert run_method(tmp_path, pd.DataFrame(), RunConfig.of(config)) == "R+R", config
 
 
 # ---- bad values stop the run at start ---------------------------------------------------------

@@ -18,10 +18,12 @@ import evo.envs
 from evo.envs.arena import ArenaParams
 from evo.envs.params import REWARD_TERMS, TaskParams
 from evo.envs.reach import ReachEnv
+from evo.envs.scene import Scene, compile_scene
 from evo.envs.task import ReachCore
 from evo.episode import Episode
 from evo.record.config import EpisodeChoice
 from evo.robot import Robot, load_robot
+from evo.robot.builder import PhysicsParams
 
 EXAMPLES = ["four_wheeler", "inchworm", "snake", "twisted_four_wheeler"]
 
@@ -135,6 +137,26 @@ def test_same_seed_same_trajectory_different_seed_different_target() -> None:
     np.testing.assert_array_equal(target_a, target_b)
     np.testing.assert_array_equal(final_a, final_b)  # threads do not change the physics
     assert not np.allclose(target_a, target_c)
+
+
+def test_arenas_given_the_compiled_scene_run_as_arenas_that_compile_their_own() -> None:
+    arena, task = ArenaParams.cluttered(), TaskParams()
+    scene = compile_scene(robot("inchworm"), PhysicsParams(), arena, task)
+
+    def run(given: Scene | None) -> np.ndarray:
+        core = ReachCore(robot("inchworm"), arena=arena, num_envs=2, seed=5, scene=given)
+        core.reset()
+        rng = np.random.default_rng(7)
+        for _ in range(20):
+            step = core.step(rng.uniform(-1, 1, (2, core.action_size)))
+        return np.concatenate([step.observation, core.state], axis=1)
+
+    first, again = run(scene), run(scene)  # two users of one model, one after the other
+    np.testing.assert_array_equal(first, run(None))
+    np.testing.assert_array_equal(again, first)
+    assert ReachCore(robot("inchworm"), arena=arena, scene=scene).model is scene.model
+    with pytest.raises(ValueError, match="scene: compiled for another robot"):
+        ReachCore(robot("snake"), arena=arena, scene=scene)
 
 
 def test_targets_fill_the_annulus() -> None:

@@ -3,22 +3,28 @@ runs still read, and a run directory made by an earlier version of evo resumes."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 import pandas as pd
 import pytest
 from numerics import assert_same_history
 
+from evo.retrain import Settings, SettingsJSON
 from evo.run.layout import RunLayout, TrainLayout
 from evo.run.records import (
     HISTORY_COLUMNS,
+    HistoryRecord,
     HistoryRow,
     RunSummary,
+    RunSummaryRecord,
     TrainSummary,
+    TrainSummaryRecord,
     read_history,
     read_run_summary,
     read_train_summary,
@@ -81,6 +87,15 @@ def test_summaries_read_back_what_they_wrote(tmp_path: Path) -> None:
     (tmp_path / "bad.json").write_text("{")
     with pytest.raises(ValueError, match="bad.json: not readable JSON"):
         read_run_summary(tmp_path / "bad.json")
+
+
+@pytest.mark.parametrize(("record", "cls"), [
+    (HistoryRecord, HistoryRow), (RunSummaryRecord, RunSummary),
+    (TrainSummaryRecord, TrainSummary), (SettingsJSON, Settings)])
+def test_each_records_json_form_names_its_fields_in_order(record: type, cls: type) -> None:
+    keys = list(typing.get_type_hints(record))
+    fields = [f.name for f in dataclasses.fields(cls)]
+    assert keys == fields, f"{record.__name__} and {cls.__name__} differ"
 
 
 def test_the_layout_names_the_files_of_both_kinds_of_run(tmp_path: Path) -> None:

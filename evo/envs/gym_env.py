@@ -77,6 +77,8 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
         self._renderer: mujoco.Renderer | None = None
         self._needs_reset = True  # before the first reset and after an episode ends
 
+    # The options and info dicts take gymnasium.Env's types (str keys, Any values): its
+    # checker and wrappers call these; their keys are documented above.
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Obs, dict[str, Any]]:
@@ -106,7 +108,8 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
                 f"per pivot), got shape {act.shape}")
         step = self.core.step(act[None])
         self._needs_reset = bool(step.terminated[0] or step.truncated[0])
-        info: dict[str, Any] = {f"reward/{k}": float(v[0]) for k, v in step.terms.items()}
+        info: dict[str, Any] = {  # gymnasium's info type
+            f"reward/{k}": float(v[0]) for k, v in step.terms.items()}
         info["success"] = bool(step.success[0])
         info["unstable"] = bool(step.unstable[0])
         return (

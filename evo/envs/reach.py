@@ -25,6 +25,7 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from evo.envs.params import REWARD_TERMS, EnvConfig
+from evo.envs.scene import Scene
 from evo.envs.task import ReachCore
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -128,7 +129,10 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
 
 
 def make_env(
-    robot: Robot, physics: PhysicsParams, env: EnvConfig, num_envs: int, seed: int | None
+    robot: Robot, physics: PhysicsParams, env: EnvConfig, num_envs: int, seed: int | None,
+    scene: Scene | None = None,
 ) -> ReachEnv:
-    """A ``ReachEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes."""
-    return ReachEnv(ReachCore(robot, physics, env.arena, env.task, num_envs, env.nthread, seed))
+    """A ``ReachEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes
+    (``scene``: its compiled scene, when the caller has one)."""
+    return ReachEnv(ReachCore(robot, physics, env.arena, env.task, num_envs, env.nthread, seed,
+                              scene=scene))

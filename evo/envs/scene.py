@@ -1,9 +1,19 @@
 """The scene of one arena as MJCF: the robot at the centre, walls, rocks and the target
-marker (``conf/env/*.yaml``), with MuJoCo's sleeping islands when the arena asks."""
+marker (``conf/env/*.yaml``), with MuJoCo's sleeping islands when the arena asks.
+
+An evaluation compiles its scene once (:func:`compile_scene`) and hands the
+:class:`Scene` to all that simulate or draw it: its recorders, the learner's arenas
+(``evo.envs.task.ReachCore``) and the recorded deterministic episode
+(``evo.learners.rollouts.play``). Nothing writes to the compiled model; each user makes
+its own ``MjData``.
+"""
 
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import mujoco
 
 from evo.envs.arena import ArenaParams, arena_scene
 from evo.envs.params import TaskParams
@@ -27,3 +37,34 @@ def build_scene(
             ET.SubElement(option, "flag", sleep="enable")
 
     return build(robot, physics, scene=scene)
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """One robot in its arena, built and compiled once.
+
+    Attributes:
+        robot, physics, arena, task: What it was built from.
+        built: The MJCF and the names of its actuators and bodies.
+        model: ``built`` compiled (read only: users make their own ``MjData``).
+    """
+
+    robot: Robot
+    physics: PhysicsParams
+    arena: ArenaParams
+    task: TaskParams
+    built: BuiltRobot
+    model: mujoco.MjModel
+
+    def of(self, robot: Robot, physics: PhysicsParams, arena: ArenaParams,
+           task: TaskParams) -> bool:
+        """Whether this is the scene of ``robot`` under these settings."""
+        return (self.robot, self.physics, self.arena, self.task) == (robot, physics, arena, task)
+
+
+def compile_scene(
+    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
+) -> Scene:
+    """:func:`build_scene` and its compiled model."""
+    built = build_scene(robot, physics, arena, task)
+    return Scene(robot, physics, arena, task, built, built.compile())

@@ -54,7 +54,7 @@ import numpy.typing as npt
 
 from evo.envs.arena import ArenaParams, sample_target, scatter_rocks
 from evo.envs.params import REWARD_TERMS, TaskParams, observation_size
-from evo.envs.scene import build_scene
+from evo.envs.scene import Scene, compile_scene
 from evo.episode import Episode
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -122,6 +122,8 @@ class ReachCore:
         num_envs: Number of arenas N.
         nthread: Threads MuJoCo's rollout uses for the N arenas.
         seed: Seed of the arenas' random targets and rocks.
+        scene: The scene of ``robot`` under these settings, compiled by the caller (an
+            evaluation compiles it once for all its users); compiled here when None.
     """
 
     def __init__(
@@ -133,6 +135,7 @@ class ReachCore:
         num_envs: int = 1,
         nthread: int = 1,
         seed: int | None = None,
+        scene: Scene | None = None,
     ) -> None:
         if num_envs < 1 or nthread < 1:
             raise ValueError(f"num_envs and nthread must be >= 1, got {num_envs}, {nthread}")
@@ -140,8 +143,11 @@ class ReachCore:
         self.physics = physics or PhysicsParams()
         self.arena = arena or ArenaParams()
         self.task = task or TaskParams()
-        self.built = build_scene(robot, self.physics, self.arena, self.task)
-        self.model = self.built.compile()
+        if scene is None:
+            scene = compile_scene(robot, self.physics, self.arena, self.task)
+        elif not scene.of(robot, self.physics, self.arena, self.task):
+            raise ValueError("scene: compiled for another robot or other settings")
+        self.built, self.model = scene.built, scene.model
         self.num_envs, self.nthread = num_envs, nthread
         self.rng = np.random.default_rng(seed)
         self._index_model()

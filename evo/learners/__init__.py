@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
     from evo.envs.params import EnvConfig
+    from evo.envs.scene import Scene
     from evo.episode import Episode
     from evo.learners.common import Inheritance, LearnerConfig, TrainResult
     from evo.robot.builder import PhysicsParams
@@ -39,7 +40,10 @@ its end)."""
 class Learner(Protocol):
     """Trains ``robot``'s behaviour for ``budget`` env steps; randomness only from
     ``seed``. ``on_curve`` gets every curve row, ``on_episode`` every episode of arena 0;
-    with ``start`` the networks begin as a parent's (``ga.inheritance``)."""
+    with ``start`` the networks begin as a parent's (``ga.inheritance``). ``scene`` is the
+    robot's arena compiled by the caller (``evo.evaluation`` compiles it once for its
+    recorders, the learner and the recorded episode); a learner compiles its own when it
+    is None."""
 
     def __call__(
         self,
@@ -53,4 +57,5 @@ class Learner(Protocol):
         on_curve: CurveHook | None = None,
         on_episode: EpisodeHook | None = None,
         start: Inheritance | None = None,
+        scene: Scene | None = None,
     ) -> TrainResult: ...

@@ -13,7 +13,7 @@ import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, NotRequired, Protocol, TypedDict
 
 import pandas as pd
 import torch
@@ -239,6 +239,19 @@ class ValueHead(nn.Module):
         return value
 
 
+class Checkpoint(TypedDict):
+    """A policy's ``.pt`` file (``torch.save`` of this dict): :meth:`Policy.state_dict`,
+    and what :func:`save_checkpoint` adds."""
+
+    obs_size: int
+    action_size: int
+    actor: dict[str, torch.Tensor]  # the modules' state_dict()
+    critic: dict[str, torch.Tensor]
+    hidden: NotRequired[list[int]]
+    normalize_obs: NotRequired[bool]
+    robot: NotRequired[str]  # the hash of the structure it was trained on
+
+
 @dataclass
 class Policy:
     """The networks of one learner: actor, critic and their shared normaliser."""
@@ -270,7 +283,7 @@ class Policy:
         """The exploring actor for collectors (shares the weights)."""
         return GaussianSampler(self.head)
 
-    def state_dict(self) -> dict[str, Any]:
+    def state_dict(self) -> Checkpoint:
         """Everything a checkpoint needs (tensors and plain numbers only)."""
         return {
             "obs_size": int(self.head.mlp[0].in_features),

@@ -38,6 +38,7 @@ from torchrl.objectives.value import GAE
 
 from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
+from evo.envs.scene import Scene
 from evo.learners import CurveHook, EpisodeHook, Learner
 from evo.learners.common import (
     Inheritance,
@@ -139,6 +140,7 @@ def train(
     on_curve: CurveHook | None = None,
     on_episode: EpisodeHook | None = None,
     start: Inheritance | None = None,
+    scene: Scene | None = None,
 ) -> TrainResult:
     """Train ``robot``'s behaviour for ``budget`` env steps (or only collect, if
     ``config.update`` is false) and return its fitness, curve and policy.
@@ -149,13 +151,15 @@ def train(
     ``on_episode`` every episode of arena 0 frame by frame. With ``start`` the networks
     begin as a parent's, slot-mapped onto this body (``evo.learners.common.inherit``);
     the fresh networks are drawn first all the same, so the rest of the seed's random
-    numbers do not depend on it.
+    numbers do not depend on it. ``scene`` is the robot's compiled arena when the caller
+    has it (compiled here otherwise).
     """
     if budget < 1:
         raise ValueError(f"budget must be >= 1 env step, got {budget}")
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return _train(robot, physics, env, config, budget, seed, on_curve, on_episode, start)
+        return _train(robot, physics, env, config, budget, seed, on_curve, on_episode, start,
+                      scene)
 
 
 def _objective(
@@ -222,10 +226,10 @@ def _train(
     seed: int,
     on_curve: CurveHook | None,
     on_episode: EpisodeHook | None,
-    inheritance: Inheritance | None = None,
+    inheritance: Inheritance | None = None, scene: Scene | None = None,
 ) -> TrainResult:
     start = time.perf_counter()
-    env = make_env(robot, physics, env_config, config.num_envs, seed)
+    env = make_env(robot, physics, env_config, config.num_envs, seed, scene)
     if on_episode is not None:
         env.core.watch(on_episode)
     policy = make_policy(env.observation_spec["observation"].shape[-1],

@@ -12,11 +12,13 @@ training can be replayed later from the checkpoint alone.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict
 
 import torch
 
 from evo.envs.params import EnvConfig
 from evo.envs.reach import make_env
+from evo.envs.scene import Scene
 from evo.envs.task import ReachCore
 from evo.episode import Episode
 from evo.learners.common import Policy
@@ -32,13 +34,16 @@ def play(
     env: EnvConfig,
     seed: int,
     episodes: int = 1,
+    scene: Scene | None = None,
 ) -> tuple[ReachCore, list[Episode]]:
-    """Run ``episodes`` deterministic episodes one after another in one arena.
+    """Run ``episodes`` deterministic episodes one after another in one arena
+    (``scene``: the robot's compiled arena, when the caller has it).
 
     Returns:
         The arena (its ``model`` describes the bodies) and the episodes.
     """
-    core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed)
+    core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed,
+                     scene=scene)
     played: list[Episode] = []
     core.watch(played.append)
     for _ in range(episodes):
@@ -50,6 +55,14 @@ def play(
             done = bool(step.terminated[0] or step.truncated[0])
     core.watch(None)
     return core, played
+
+
+class PolicyEvaluationJSON(TypedDict):
+    """A :class:`PolicyEvaluation` as ``summary.json`` holds it."""
+
+    success_rate: float
+    mean_return: float
+    returns: list[float]
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,7 +79,7 @@ class PolicyEvaluation:
     mean_return: float
     returns: tuple[float, ...]
 
-    def summary(self) -> dict[str, float | list[float]]:
+    def summary(self) -> PolicyEvaluationJSON:
         """``success_rate``, ``mean_return`` and the list of ``returns`` (summary.json)."""
         return {"success_rate": self.success_rate, "mean_return": self.mean_return,
                 "returns": list(self.returns)}

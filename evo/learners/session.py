@@ -13,14 +13,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from evo.envs.params import EnvConfig, observation_size
 from evo.learners.common import LearnerConfig, TrainResult, load_checkpoint, save_checkpoint
-from evo.learners.rollouts import evaluate_policy
+from evo.learners.rollouts import PolicyEvaluationJSON, evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import Robot
@@ -125,8 +125,18 @@ def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
     return summary
 
 
+class EvaluationSummary(PolicyEvaluationJSON):
+    """``summary.json`` of ``+exp=evaluate``: the policy's evaluation and what it ran."""
+
+    robot: str
+    checkpoint: str
+    arena: str
+    episodes: int
+    seed: int
+
+
 def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingParts, *, seed: int,
-                   out: Path, console: Console | None = None) -> dict[str, Any]:
+                   out: Path, console: Console | None = None) -> EvaluationSummary:
     """Run the policy in ``checkpoint`` deterministically for the learner's
     ``eval_episodes`` episodes."""
     physics, env, episodes = parts.physics, parts.env, parts.learner.eval_episodes
@@ -134,7 +144,7 @@ def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingParts, *, seed
     policy = load_checkpoint(checkpoint, robot=robot, obs_size=observation_size(robot, env.task))
     evaluation = evaluate_policy(robot, policy, physics=physics, env=env, episodes=episodes,
                                  seed=seed)
-    summary = {
+    summary: EvaluationSummary = {
         "robot": robot.name,
         "checkpoint": str(checkpoint),
         "arena": env.name,

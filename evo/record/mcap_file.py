@@ -38,7 +38,7 @@ import json
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Unpack
+from typing import Any, TypedDict, Unpack
 
 import foxglove
 import mujoco
@@ -65,7 +65,7 @@ from evo.record.base import RecorderBase, RecorderOptions
 from evo.record.geometry import BOX, CYLINDER, Geometry, scene_geometry
 from evo.record.rows import encode_metadata, encode_row, json_number, object_schema, plain
 from evo.record.transforms import PARENT_FRAME, TransformEncoder
-from evo.run.files import full_disk
+from evo.run.files import JSONObject, JSONValue, full_disk
 
 TOPIC_SCENE = "/scene"
 TOPIC_TF = "/tf"
@@ -89,6 +89,29 @@ _STEP_SCHEMA = object_schema("evo.EpisodeStep", {
     "episode": "integer", "step": "integer", "sim_time": "number",
     "reward": {"type": "object", "additionalProperties": {"type": "number"}},
     "return": "number"})
+
+
+class EpisodeInfo(TypedDict):
+    """A message of ``/episode``: one recorded episode, before its frames."""
+
+    index: int
+    env_step: int
+    success: bool
+    frames: int
+    target: list[float]
+    clock_start: int  # replay-clock ns of its first frame
+    clock_end: int
+    bodies: list[str]  # the model's bodies, in order
+    moving: list[str]  # those with a transform per frame
+    still: list[str]  # those with one transform at the start
+    reward_terms: list[str]
+
+
+EpisodeStep = TypedDict("EpisodeStep", {
+    "episode": int, "step": int, "sim_time": float | str | None,
+    "reward": dict[str, float | str | None], "return": float | str | None})
+"""A message of ``/episode/step`` (numbers as ``evo.record.rows.json_number`` writes
+them: NaN as null, infinities as strings)."""
 
 
 class RecordError(RuntimeError):
@@ -191,7 +214,7 @@ class McapFile:
                 raise full from err
             raise
 
-    def channel(self, topic: str, schema: foxglove.Schema | dict[str, Any],
+    def channel(self, topic: str, schema: foxglove.Schema | JSONObject,
                 message_encoding: str) -> foxglove.Channel:
         """A channel of this file, released when the file is closed."""
         channel = foxglove.Channel(
@@ -200,7 +223,7 @@ class McapFile:
         self.channels.append(channel)
         return channel
 
-    def json_channel(self, topic: str, schema: Mapping[str, Any]) -> foxglove.Channel:
+    def json_channel(self, topic: str, schema: Mapping[str, JSONValue]) -> foxglove.Channel:
         """A JSON channel with a JSON schema (``title`` names the schema)."""
         return self.channel(topic, dict(schema), "json")
 
@@ -324,7 +347,7 @@ class McapRecorder(RecorderBase):
         ep, stamps = frames.episode, frames.stamps.tolist()
         names = np.array(self.body_names)
         moving, still = names[frames.moving].tolist(), names[frames.still].tolist()
-        info = {
+        info: EpisodeInfo = {
             "index": ep.index,
             "env_step": ep.env_step,
             "success": bool(ep.success),

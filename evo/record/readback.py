@@ -32,9 +32,12 @@ from evo.record.mcap_file import (
     TOPIC_EPISODE,
     TOPIC_STEP,
     TOPIC_TF,
+    EpisodeInfo,
+    EpisodeStep,
     RecordError,
 )
 from evo.record.rows import current_curve_key, decode_metadata, decode_row, from_json_number
+from evo.run.files import JSONObject
 
 
 @dataclass
@@ -103,7 +106,7 @@ def is_complete(path: str | Path) -> bool:
     return _scan(path).complete
 
 
-def read_metadata(path: str | Path) -> dict[str, Any]:
+def read_metadata(path: str | Path) -> JSONObject:
     """The metadata given when recording started, updated with the summary given at
     close (``fitness`` ...; absent when the writer died first).
 
@@ -135,7 +138,7 @@ def read_curve(path: str | Path) -> pd.DataFrame:
     return curve.rename(columns=current_curve_key)
 
 
-def read_json_topic(path: str | Path, topic: str) -> list[dict[str, Any]]:
+def read_json_topic(path: str | Path, topic: str) -> list[JSONObject]:
     """Every JSON message of ``topic`` in file order (as written)."""
     scan = _scan(path, [topic])
     return [json.loads(m.data) for m in scan.messages[topic]]
@@ -161,9 +164,9 @@ def _fill(
 
 
 def _episode(
-    info: dict[str, Any],
+    info: EpisodeInfo,
     tf: list[Message],
-    steps: list[dict[str, Any]],
+    steps: list[EpisodeStep],
     decode: Callable[[bytes], Any],
 ) -> Episode:
     """One episode from its info, its ``/tf`` messages (the still bodies' first, if
@@ -204,7 +207,7 @@ def read_episodes(path: str | Path) -> list[Episode]:
     left out.
     """
     scan = _scan(path, [TOPIC_EPISODE, TOPIC_TF, TOPIC_STEP])
-    infos = [json.loads(m.data) for m in scan.messages[TOPIC_EPISODE]]
+    infos: list[EpisodeInfo] = [json.loads(m.data) for m in scan.messages[TOPIC_EPISODE]]
     if not infos:
         return []
     decode = _tf_decoder(path, scan)
@@ -217,7 +220,7 @@ def read_episodes(path: str | Path) -> list[Episode]:
         step_end = step_at + frames
         if tf_end > len(tf) or step_end > len(steps):
             break
-        rows = [json.loads(m.data) for m in steps[step_at:step_end]]
+        rows: list[EpisodeStep] = [json.loads(m.data) for m in steps[step_at:step_end]]
         episodes.append(_episode(info, tf[tf_at:tf_end], rows, decode))
         tf_at, step_at = tf_end, step_end
     return episodes

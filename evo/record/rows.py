@@ -17,9 +17,11 @@ import json
 import math
 from collections.abc import Mapping
 from pathlib import PurePath
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+
+from evo.run.files import JSONObject, JSONValue
 
 CURVE_AXES = ("env_steps", "wall_seconds")
 """Curve keys that are axes (what the metrics are plotted against): not namespaced."""
@@ -71,9 +73,9 @@ def from_json_number(value: Any) -> Any:
     return value
 
 
-def _nest(row: Mapping[str, Any]) -> dict[str, Any] | None:
+def _nest(row: Mapping[str, JSONValue]) -> JSONObject | None:
     """``row`` nested at ``/``, or None when that would reorder or collide."""
-    out: dict[str, Any] = {}
+    out: JSONObject = {}
     last: str | None = None
     for key, value in row.items():
         head, sep, rest = key.partition("/")
@@ -98,9 +100,9 @@ def _nest(row: Mapping[str, Any]) -> dict[str, Any] | None:
     return out
 
 
-def flatten(obj: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+def flatten(obj: Mapping[str, JSONValue], prefix: str = "") -> JSONObject:
     """Nested objects back to ``a/b`` keys, in order."""
-    out: dict[str, Any] = {}
+    out: JSONObject = {}
     for key, value in obj.items():
         name = f"{prefix}{key}"
         if isinstance(value, dict):
@@ -119,12 +121,13 @@ def encode_row(row: Mapping[str, Any]) -> bytes:
     ).encode()
 
 
-def decode_row(data: bytes) -> dict[str, Any]:
+def decode_row(data: bytes) -> dict[str, float]:
     """Inverse of ``encode_row``."""
     obj = json.loads(data)
     if not isinstance(obj, dict):
         raise ValueError(f"a curve row must be a JSON object, got {type(obj).__name__}")
-    return flatten(obj)
+    # encode_row wrote numbers only (bools and ints stay what they were)
+    return cast(dict[str, float], flatten(obj))
 
 
 def plain(value: Any) -> Any:
@@ -142,11 +145,11 @@ def plain(value: Any) -> Any:
     return value
 
 
-def object_schema(title: str, properties: Mapping[str, str | dict[str, Any]], *,
-                  description: str = "", additional: bool = False) -> dict[str, Any]:
+def object_schema(title: str, properties: Mapping[str, str | JSONObject], *,
+                  description: str = "", additional: bool = False) -> JSONObject:
     """The JSON Schema of an MCAP JSON channel's messages: an object with ``properties``
     (a string is that JSON type), open to other keys when ``additional``."""
-    schema: dict[str, Any] = {"title": title}
+    schema: JSONObject = {"title": title}
     if description:
         schema["description"] = description
     schema["type"] = "object"
@@ -180,7 +183,7 @@ def encode_metadata(values: Mapping[str, Any]) -> dict[str, str]:
     return out
 
 
-def decode_metadata(record: Mapping[str, str]) -> dict[str, Any]:
+def decode_metadata(record: Mapping[str, str]) -> JSONObject:
     """Inverse of ``encode_metadata``."""
     encoded = set(json.loads(record.get(_JSON_KEYS, "[]")))
     return {k: json.loads(v) if k in encoded else v for k, v in record.items() if k != _JSON_KEYS}

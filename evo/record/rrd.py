@@ -24,7 +24,7 @@ import ctypes
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Unpack
+from typing import Any, TypedDict, Unpack
 
 import mujoco
 import numpy as np
@@ -56,6 +56,15 @@ def _rgba8(rgba: npt.NDArray[np.float64]) -> npt.NDArray[np.uint8]:
     return np.clip(np.round(rgba * 255), 0, 255).astype(np.uint8)
 
 
+class _Common(TypedDict):
+    """What the boxes, cylinders and ellipsoids of one kind share."""
+
+    centers: npt.NDArray[np.float64]
+    quaternions: npt.NDArray[np.float64]  # x, y, z, w (rerun's order)
+    colors: npt.NDArray[np.uint8]
+    fill_mode: rr.components.FillMode
+
+
 def log_geometry(rec: rr.RecordingStream, path: str, geometry: Geometry) -> None:
     """Log ``geometry`` under ``path`` as static boxes, cylinders and ellipsoids."""
     solid = rr.components.FillMode.Solid
@@ -63,12 +72,8 @@ def log_geometry(rec: rr.RecordingStream, path: str, geometry: Geometry) -> None
         part = geometry.of_kind(kind)
         if not len(part):
             continue
-        common: dict[str, Any] = {
-            "centers": part.pos,
-            "quaternions": part.quat[:, [1, 2, 3, 0]],
-            "colors": _rgba8(part.rgba),
-            "fill_mode": solid,
-        }
+        common = _Common(centers=part.pos, quaternions=part.quat[:, [1, 2, 3, 0]],
+                         colors=_rgba8(part.rgba), fill_mode=solid)
         if kind == BOX:
             archetype: Any = rr.Boxes3D(half_sizes=part.half_size, **common)
         elif kind == CYLINDER:

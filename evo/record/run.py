@@ -19,7 +19,7 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import mujoco
 import numpy as np
@@ -35,6 +35,7 @@ from evo.record.mcap_file import McapFile, scene_entity
 from evo.record.readback import read_json_topic
 from evo.record.rows import flatten, json_number, object_schema, plain
 from evo.record.rrd import entity, finish_rrd, log_geometry, open_rrd, release_streams
+from evo.run.files import JSONObject
 from evo.run.layout import RunLayout
 
 TOPIC_BIRTHS = "/ga/births"
@@ -70,9 +71,9 @@ class Birth:
     population_mean: float
     extra: Mapping[str, Any] = field(default_factory=dict)
 
-    def row(self) -> dict[str, Any]:
+    def row(self) -> JSONObject:
         """The birth as one flat JSON-ready row."""
-        row: dict[str, Any] = {
+        row: JSONObject = {
             "birth": self.index,
             "name": self.name,
             "fitness": json_number("fitness", self.fitness),
@@ -108,6 +109,15 @@ def robot_geometry(model: mujoco.MjModel, offset: np.ndarray) -> Geometry:
 def read_births(path: str | Path) -> pd.DataFrame:
     """The births of a ``run.mcap``, one row each, in birth order."""
     return pd.DataFrame([flatten(row) for row in read_json_topic(path, TOPIC_BIRTHS)])
+
+
+class RunMetadata(TypedDict):
+    """What ``run.mcap`` records when it opens (``evo.evolution.RunLog``)."""
+
+    config: str  # the resolved config.yaml
+    seed: int
+    method: str
+    name: str  # the run directory's name
 
 
 class RunRecorder(RecorderBase):

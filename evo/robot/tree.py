@@ -20,7 +20,7 @@ import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import NotRequired, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -106,6 +106,28 @@ def child_frame(face: int, rotation: int) -> IntMatrix:
     return FACE_AXES[face] @ ROT_X[rotation]
 
 
+class EdgeJSON(TypedDict):
+    """A child on a face, in an ``evo.robot/1`` document."""
+
+    face: int
+    rotation: int
+    module: NodeJSON
+
+
+class NodeJSON(TypedDict):
+    """A module in an ``evo.robot/1`` document (``children`` only when it has some)."""
+
+    type: str
+    children: NotRequired[list[EdgeJSON]]
+
+
+class RobotJSON(TypedDict):
+    """An ``evo.robot/1`` document."""
+
+    format: str
+    root: NodeJSON
+
+
 @dataclass(frozen=True, slots=True)
 class Edge:
     """The connection of a child module to one face of its parent."""
@@ -143,9 +165,9 @@ class Node:
         """The edge on ``face``, or None when the face is free."""
         return next((e for e in self.children if e.face == face), None)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> NodeJSON:
         """The node as the JSON object of the ``evo.robot/1`` format."""
-        out: dict[str, Any] = {"type": self.type.value}
+        out: NodeJSON = {"type": self.type.value}
         if self.children:
             out["children"] = [
                 {"face": e.face, "rotation": e.rotation, "module": e.module.to_dict()}
@@ -242,7 +264,7 @@ class Robot:
 
     root: Node
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> RobotJSON:
         """The robot as an ``evo.robot/1`` JSON document."""
         return {"format": FORMAT, "root": self.root.to_dict()}
 

@@ -30,14 +30,21 @@ import os
 import resource
 import socket
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TypeAlias
 
 import pandas as pd
 
 from evo.run.layout import RunLayout
+
+JSONValue: TypeAlias = "None | bool | int | float | str | list[JSONValue] | dict[str, JSONValue]"
+"""A value of a JSON document as ``json.loads`` gives it."""
+
+JSONObject: TypeAlias = dict[str, JSONValue]
+"""A JSON object whose keys are open (curve metrics, metadata, a JSON Schema); a document
+with known keys is a ``TypedDict`` of its own (``evo.run.records``)."""
 
 DISK_FULL = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
 """The ``errno`` of a full disk, a file-size limit (``RLIMIT_FSIZE``) and a full quota."""
@@ -117,8 +124,9 @@ def write_text(path: Path, text: str) -> Path:
     return write_bytes(path, text.encode())
 
 
-def write_json(path: Path, data: dict[str, Any]) -> Path:
-    """Write ``data`` as JSON atomically (a crash leaves the old file or the new one)."""
+def write_json(path: Path, data: Mapping[str, object]) -> Path:
+    """Write ``data`` (a JSON document: a ``TypedDict`` or a :data:`JSONObject`) as JSON
+    atomically (a crash leaves the old file or the new one)."""
     return write_text(path, json.dumps(data, indent=2, sort_keys=True) + "\n")
 
 

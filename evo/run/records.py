@@ -21,7 +21,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 import pandas as pd
@@ -35,6 +35,32 @@ STATUSES = ("trained", "stopped-early", "failed")
 """``trained``: its whole budget; ``stopped-early``: early rejection stopped it (it never
 enters the population; ``fitness`` is Eq. 8 over the episodes it completed and
 ``predicted`` the rule's prediction); ``failed``: the evaluation raised (``error``)."""
+
+
+class HistoryRecord(TypedDict):
+    """A :class:`HistoryRow` as ``state.json`` and ``history.csv`` hold it: its fields,
+    ``parents`` joined by :data:`PARENT_SEPARATOR`."""
+
+    birth: int
+    name: str
+    method: str
+    parents: str
+    operator: str
+    budget: int
+    seed: int
+    fitness: float
+    accepted: bool
+    replaced: str
+    env_steps: int
+    episodes: int
+    wall_seconds: float
+    error: str
+    population_best: float
+    population_mean: float
+    status: str
+    predicted: float
+    threshold: float
+    inherited_from: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,11 +129,11 @@ class HistoryRow:
         """Whether early rejection stopped its training."""
         return self.status == "stopped-early"
 
-    def record(self) -> dict[str, Any]:
+    def record(self) -> HistoryRecord:
         """The row as ``state.json`` and ``history.csv`` hold it (``parents`` joined)."""
         row = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         row["parents"] = PARENT_SEPARATOR.join(self.parents)
-        return row
+        return cast(HistoryRecord, row)  # its keys are the fields (tests/test_records.py)
 
     @classmethod
     def from_record(cls, row: Mapping[str, Any]) -> HistoryRow:
@@ -176,6 +202,26 @@ def read_history(path: Path) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- an evolution's summary
+
+
+class RunSummaryRecord(TypedDict):
+    """A :class:`RunSummary` as ``summary.json`` and the run's recordings hold it."""
+
+    method: str
+    robots_evaluated: int
+    robot_budget: int
+    failed: int
+    best_robot: str | None
+    best_fitness: float | None
+    best_initial_fitness: float | None
+    accept_rate: float | None
+    env_steps: int
+    wall_seconds: float
+    steps_per_second: float
+    complete: bool
+    stopped_early: int
+    env_steps_saved: int
+    best_note: str
 
 
 @dataclass(frozen=True)
@@ -251,9 +297,9 @@ class RunSummary:
                 "mean return of unfinished episodes" if best and not finished else ""),
         )
 
-    def record(self) -> dict[str, Any]:
+    def record(self) -> RunSummaryRecord:
         """The summary as ``summary.json`` (and the run's recordings) hold it."""
-        return dataclasses.asdict(self)
+        return cast(RunSummaryRecord, dataclasses.asdict(self))
 
 
 def write_run_summary(path: Path, summary: RunSummary) -> Path:
@@ -280,6 +326,26 @@ def read_run_summary(path: Path) -> RunSummary | None:
 
 
 # ---------------------------------------------------------------- a training's summary
+
+
+class TrainSummaryRecord(TypedDict):
+    """A :class:`TrainSummary` as ``summary.json`` holds it (the evaluation's keys only
+    after one)."""
+
+    robot: str
+    seed: int
+    fitness: float
+    env_steps: float
+    learner: str
+    arena: str
+    episodes: int
+    wall_seconds: float
+    steps_per_second: float
+    unstable_episodes: int
+    timing_seconds: dict[str, float]
+    success_rate: NotRequired[float | None]
+    eval_mean_return: NotRequired[float | None]
+    eval_episodes: NotRequired[int | None]
 
 
 @dataclass(frozen=True)
@@ -318,13 +384,13 @@ class TrainSummary:
     eval_mean_return: float | None = None
     eval_episodes: int | None = None
 
-    def record(self) -> dict[str, Any]:
+    def record(self) -> TrainSummaryRecord:
         """The summary as ``summary.json`` holds it (no evaluation keys without one)."""
         data = dataclasses.asdict(self)
         if self.eval_episodes is None:
             for key in ("success_rate", "eval_mean_return", "eval_episodes"):
                 data.pop(key)
-        return data
+        return cast(TrainSummaryRecord, data)
 
 
 def write_train_summary(path: Path, summary: TrainSummary) -> Path:

@@ -13,9 +13,10 @@ subclass that overrides ``save_robot``, ``write_json`` or ``write_history``.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 import numpy as np
 
@@ -37,6 +38,21 @@ from evo.run.records import (
 STATE_VERSION = 1
 
 
+class RngState(TypedDict):
+    """The breeding generator's ``bit_generator.state`` (numpy's ``PCG64``), as
+    ``state.json`` holds it."""
+
+    bit_generator: str
+    state: dict[str, int]  # the 128-bit ``state`` and ``inc``
+    has_uint32: int
+    uinteger: int
+
+
+def rng_state(rng: np.random.Generator) -> RngState:
+    """``rng``'s state to save (a copy: the generator goes on drawing)."""
+    return cast(RngState, dict(rng.bit_generator.state))
+
+
 @dataclass(frozen=True)
 class SavedState:
     """A run's resumable state (what ``state.json`` holds), checked when loaded.
@@ -53,7 +69,7 @@ class SavedState:
 
     seed: int
     next_birth: int
-    rng: dict[str, Any]
+    rng: RngState
     population: list[Member]
     history: list[HistoryRow]
     pending: list[Candidate]
@@ -112,7 +128,7 @@ class RunStore:
         self.write_json(self.layout.population, {"population": population})
         write_run_summary(self.layout.summary, summary)
 
-    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
+    def write_json(self, path: Path, data: Mapping[str, object]) -> Path:
         """Write one of the run's JSON files atomically (``evo.run.files.write_json``)."""
         return files.write_json(path, data)
 
