@@ -1,31 +1,7 @@
 #!/usr/bin/env bash
-# The ablation (+exp=ablation_100k, 4 methods x 100 robots x GA seeds 0, 1, 2): every
-# unfinished run at once, one process each (executor=serial), sharing the machine's
-# cores, so that all seeds grow together and a report over each run's first N robots
-# (--first N) can be made before the end. Resumable: rerun it to continue every
-# unfinished run. SEEDS="1 2" limits it to some seeds.
+# The ablation in its 100k regime (+exp=ablation_100k, 4 methods x 100 robots x GA
+# seeds 0, 1, 2) into runs/ablation_100k/: docs/results/ablation/run.sh with that
+# experiment; resumable the same way. SEEDS="1 2" limits it to some seeds.
 #   docs/results/ablation_100k/run.sh                  # from the repository root
 #   python -m analysis.report runs/ablation_100k --out docs/results/ablation_100k [--first 60]
-set -u
-cd "$(dirname "$0")/../../.."
-py=${PYTHON:-.venv/bin/python}
-one() {
-  local structure=$1 learner=$2 name=$3 seed=$4
-  local dir=runs/ablation_100k/${name}_seed$seed
-  if grep -qs '"complete": true' "$dir/summary.json"; then return; fi
-  if [ -f "$dir/state.json" ]; then
-    args=("resume=$dir")
-  else
-    args=(+exp=ablation_100k hydra.mode=RUN ga.structure="$structure" learner="$learner"
-          seed="$seed" executor=serial "hydra.run.dir=$dir")
-  fi
-  MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/ablation_100k_${name}_seed$seed.log" 2>&1
-}
-mkdir -p runs
-for seed in ${SEEDS:-0 1 2}; do
-  for spec in "E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"; do
-    # shellcheck disable=SC2086
-    one $spec "$seed" &
-  done
-done
-wait
+EXP=ablation_100k SEEDS=${SEEDS:-0 1 2} exec "$(dirname "$0")/../ablation/run.sh"

@@ -1,6 +1,7 @@
 """The hand-made robots retrained from scratch: one row per training, and per robot and
 arena the deterministic success rate and evaluation return over the seeds.
 
+    python docs/results/designer/table.py SWEEP [SWEEP ...] OUT
     python docs/results/designer/table.py runs/designer docs/results/designer
 """
 
@@ -32,8 +33,9 @@ def trainings(sweep: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def main(sweep: Path, out: Path) -> None:
-    table = trainings(sweep).sort_values(["arena", "robot", "seed"])
+def main(sweeps: list[Path], out: Path) -> None:
+    table = pd.concat([trainings(sweep) for sweep in sweeps]).sort_values(
+        ["arena", "robot", "seed"])
     table.to_csv(out / "trainings.csv", index=False)
     per_robot = table.groupby(["arena", "robot"]).agg(
         seeds=("seed", "count"), success_mean=("success_rate", "mean"),
@@ -44,4 +46,4 @@ def main(sweep: Path, out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]))
+    main([Path(arg) for arg in sys.argv[1:-1]], Path(sys.argv[-1]))
