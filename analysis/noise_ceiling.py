@@ -63,7 +63,7 @@ from analysis.bootstrap import Resampling, Statistic, bootstrap_ci
 from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.tables import require_columns
-from evo.retrain import RetrainConfig, RetrainError, Settings, wall_seconds
+from evo.retrain import RetrainConfig, RetrainError, Retraining, Settings, wall_seconds
 from evo.run import layout as files
 from evo.run.layout import RetrainLayout
 
@@ -248,8 +248,9 @@ def _by_role(trainings: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
 
 def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
                  wall_seconds: float, command: str, resampling: Resampling | None = None
-                 ) -> Path:
-    """``noise_ceiling.md``, ``.csv``, ``.png`` and ``summary.json`` from the trainings."""
+                 ) -> Summary:
+    """``noise_ceiling.md``, ``.csv``, ``.png`` and ``summary.json`` from the trainings;
+    returns what ``summary.json`` holds (:func:`read_summary` reads it back)."""
     from analysis.plots import plot_seed_scatter
 
     table = ceiling_table(trainings, resampling or Resampling.seeded(0))
@@ -268,9 +269,18 @@ def write_report(out: Path, trainings: pd.DataFrame, settings: Settings, *,
                  for row in table.to_dict("records")},
     )
     layout.summary.write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    report = layout.report
-    report.write_text(_markdown(table, trainings, settings, summary), encoding="utf-8")
-    return report
+    layout.report.write_text(_markdown(table, trainings, settings, summary), encoding="utf-8")
+    return summary
+
+
+def read_summary(out: Path) -> Summary | None:
+    """``summary.json`` of the noise-ceiling folder ``out``, as :func:`write_report`
+    wrote it; None when the folder has none (its report is not written yet)."""
+    path = RetrainLayout(out).summary
+    if not path.is_file():
+        return None
+    summary: Summary = json.loads(path.read_text(encoding="utf-8"))
+    return summary
 
 
 def _markdown(table: pd.DataFrame, trainings: pd.DataFrame, settings: Settings,
@@ -337,21 +347,49 @@ def run(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
             it again to retry the failed ones).
         evo.config.ConfigError: For a config that cannot train (its key named).
     """
-    from evo.edge import executor_of, retraining
-    from evo.pool import EvaluationPool
-    from evo.retrain import run_trainings
+    from evo.edge import retraining
 
     retrain = retraining(cfg, out, config, root_seed=root_seed, overrides=overrides)
     if on_ready is not None:
         on_ready()
+    report_trainings(cfg, out, retrain, replicates=2, command=command,
+                     resamples=config.resamples, too_few=lambda: TooFewTrainings(
+                         f"{out}: fewer than 3 structures have two finished trainings; "
+                         "run the same command again"))
+    return RetrainLayout(out).report
+
+
+def report_trainings(cfg: DictConfig, out: Path, retrain: Retraining, *, replicates: int,
+                     command: str, resamples: int, too_few: Callable[[], Exception]
+                     ) -> tuple[pd.DataFrame, Summary]:
+    """Run (or resume) ``retrain``'s trainings through ``cfg``'s executor, then write the
+    report of ``out``.
+
+    Args:
+        cfg: The composed config (its executor).
+        out: The run directory.
+        retrain: The trainings (``evo.edge.retraining``).
+        replicates: Finished trainings a structure needs to count; at least 3 such
+            structures, or ``too_few()`` is raised.
+        command: The command, as ``summary.json`` and the report name it.
+        resamples: Bootstrap resamples of the report's intervals.
+        too_few: The error for too few finished structures.
+
+    Returns:
+        The trainings, and what ``summary.json`` holds.
+    """
+    from evo.edge import executor_of
+    from evo.pool import EvaluationPool
+    from evo.retrain import run_trainings
+
     trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
-    replicates = _by_role(trainings)[0].groupby("structure").size()
-    if (replicates >= 2).sum() < 3:
-        raise TooFewTrainings(f"{out}: fewer than 3 structures have two finished "
-                              "trainings; run the same command again")
-    return write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
-                        command=command,
-                        resampling=Resampling.seeded(0, config.resamples))
+    finished = _by_role(trainings)[0].groupby("structure").size()
+    if (finished >= replicates).sum() < 3:
+        raise too_few()
+    summary = write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
+                           command=command,
+                           resampling=Resampling.seeded(0, resamples))
+    return trainings, summary
 
 
 # ---------------------------------------------------------------- the older command line

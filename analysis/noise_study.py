@@ -18,7 +18,6 @@ cells and reuses finished trainings. Each cell's folder is
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,7 +27,6 @@ import pandas as pd
 from analysis import noise_ceiling as nc
 from analysis.markdown import fmt_ci, markdown_table
 from analysis.plots import plot_noise_study
-from evo.run.layout import RetrainLayout
 
 SETTINGS: dict[str, tuple[str, ...]] = {
     # The paper's learner (ML-Agents' 12 areas, 128-step rollouts) and episodes of
@@ -96,10 +94,9 @@ def study_table(folders: Sequence[Path]) -> pd.DataFrame:
     """One row per finished cell and estimator: settings, budget, metrics, speed."""
     rows = []
     for folder in folders:
-        path = RetrainLayout(folder).summary
-        if not path.is_file():
+        summary = nc.read_summary(folder)
+        if summary is None:
             continue
-        summary = json.loads(path.read_text())
         settings = summary["settings"]
         for estimator, m in summary["metrics"].items():
             rows.append(dict(

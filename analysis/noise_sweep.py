@@ -138,13 +138,10 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
     """
     import pandas as pd
 
-    from analysis.bootstrap import Resampling
-    from analysis.noise_ceiling import write_report
+    from analysis.noise_ceiling import report_trainings
     from evo.config import ConfigError, typed
-    from evo.edge import executor_of, retraining
-    from evo.pool import EvaluationPool
-    from evo.retrain import RetrainConfig, RetrainError, run_trainings, wall_seconds
-    from evo.run.layout import RetrainLayout
+    from evo.edge import retraining
+    from evo.retrain import RetrainConfig, RetrainError
 
     sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
     config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
@@ -153,15 +150,11 @@ def run_trial(cfg: DictConfig, out: Path, overrides: Sequence[str] = ()) -> Tria
         retrain = retraining(cfg, out, config, root_seed=sweep.robot_seed, overrides=overrides)
     except RetrainError as err:
         raise ConfigError(f"noise_sweep: {err}") from None
-    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
-    finished = trainings.groupby("structure").size()
-    if (finished >= sweep.seeds).sum() < 3:
-        raise SweepError(f"{out}: fewer than 3 robots have all {sweep.seeds} trainings "
-                         "finished; the trial failed")
-    command = "python evo/main.py " + " ".join(overrides)
-    write_report(out, trainings, retrain.settings, wall_seconds=wall_seconds(out),
-                 command=command, resampling=Resampling.seeded(0, sweep.resamples))
-    summary = json.loads(RetrainLayout(out).summary.read_text())
+    trainings, summary = report_trainings(
+        cfg, out, retrain, replicates=sweep.seeds,
+        command="python evo/main.py " + " ".join(overrides), resamples=sweep.resamples,
+        too_few=lambda: SweepError(f"{out}: fewer than 3 robots have all {sweep.seeds} "
+                                   "trainings finished; the trial failed"))
     metrics = summary["metrics"]["fitness"]
     result = TrialResult(
         objective=sweep.objective, value=float(metrics[sweep.objective]),
