@@ -32,7 +32,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from evo.evaluation import evaluate
 from evo.evolution import RunLog
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
@@ -82,10 +81,9 @@ class Killer:
 
     def code(self) -> EvolveCode:
         """The run's code, with every seam that counts events."""
-        return EvolveCode(
+        return EvolveCode.with_seams(
+            open_recorder=self.open_recorder, save_policy=self.save_policy,
             store=functools.partial(DyingStore, killer=self),
-            evaluate=functools.partial(evaluate, open_recorder=self.open_recorder,
-                                       save_policy=self.save_policy),
             run_log=functools.partial(DyingLog, killer=self),
         )
 
