@@ -96,14 +96,12 @@ class DyingStore(RunStore):
         super().__init__(root)
         self.killer = killer
 
-    def write_json(self, path: Path, data: Mapping[str, object]) -> Path:
-        if path != self.layout.state:
-            return super().write_json(path, data)
+    def write_state(self, data: Mapping[str, object]) -> Path:
         if self.killer.hit("state-write"):
             text = json.dumps(data)
-            path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
+            self.layout.state.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
             die()
-        super().write_json(path, data)
+        path = super().write_state(data)
         history = data["history"]
         assert isinstance(history, list)  # RunStore.save's state: its rows
         if not data["pending"] and self.killer.hit("between"):

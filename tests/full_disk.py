@@ -98,11 +98,9 @@ class FillingStore(RunStore):
         super().__init__(root)
         self.disk = disk
 
-    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
-        if path != self.layout.state:
-            return super().write_json(path, data)
+    def write_state(self, data: dict[str, Any]) -> Path:
         self.disk.fill("state")
-        done = super().write_json(path, data)
+        done = super().write_state(data)
         self.disk.saved(data)
         return done
 
