@@ -193,10 +193,11 @@ class EvolveCode:
     run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog
 
     @classmethod
-    def with_seams(cls, *, open_recorder: OpenRecorder, save_policy: SavePolicy,
-                   store: Callable[[Path], RunStore] = RunStore,
-                   run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog,
-                   ) -> EvolveCode:
+    def with_seams(
+        cls, *, open_recorder: OpenRecorder, save_policy: SavePolicy,
+        store: Callable[[Path], RunStore] = RunStore,
+        run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog,
+    ) -> EvolveCode:
         """evo's code with evaluations that open their recorders with ``open_recorder``
         and write their policies with ``save_policy`` (``evo.evaluation.evaluate``'s
         seams), and the given ``store`` and ``run_log``."""
