@@ -32,7 +32,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from evo.evaluation import evaluate
 from evo.evolution import RunLog
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
@@ -82,10 +81,9 @@ class Killer:
 
     def code(self) -> EvolveCode:
         """The run's code, with every seam that counts events."""
-        return EvolveCode(
+        return EvolveCode.with_seams(
+            open_recorder=self.open_recorder, save_policy=self.save_policy,
             store=functools.partial(DyingStore, killer=self),
-            evaluate=functools.partial(evaluate, open_recorder=self.open_recorder,
-                                       save_policy=self.save_policy),
             run_log=functools.partial(DyingLog, killer=self),
         )
 
@@ -98,14 +96,12 @@ class DyingStore(RunStore):
         super().__init__(root)
         self.killer = killer
 
-    def write_json(self, path: Path, data: Mapping[str, object]) -> Path:
-        if path != self.layout.state:
-            return super().write_json(path, data)
+    def write_state(self, data: Mapping[str, object]) -> Path:
         if self.killer.hit("state-write"):
             text = json.dumps(data)
-            path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
+            self.layout.state.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
             die()
-        super().write_json(path, data)
+        path = super().write_state(data)
         history = data["history"]
         assert isinstance(history, list)  # RunStore.save's state: its rows
         if not data["pending"] and self.killer.hit("between"):

@@ -54,7 +54,8 @@ from evo.edge import (
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.interrupt import Interrupted, critical, handle_signals
-from evo.record import RecordConfig
+from evo.learners.common import SavePolicy
+from evo.record import OpenRecorder, RecordConfig
 from evo.record.run import RunMetadata
 from evo.robot import (
     InvalidRobotError,
@@ -190,6 +191,19 @@ class EvolveCode:
     store: Callable[[Path], RunStore] = RunStore
     evaluate: Callable[[Candidate, Job], Outcome] = evaluate
     run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog
+
+    @classmethod
+    def with_seams(
+        cls, *, open_recorder: OpenRecorder, save_policy: SavePolicy,
+        store: Callable[[Path], RunStore] = RunStore,
+        run_log: Callable[[RunStore, RecordConfig, RunMetadata], RunLog] = RunLog,
+    ) -> EvolveCode:
+        """evo's code with evaluations that open their recorders with ``open_recorder``
+        and write their policies with ``save_policy`` (``evo.evaluation.evaluate``'s
+        seams), and the given ``store`` and ``run_log``."""
+        return cls(store=store, run_log=run_log,
+                   evaluate=functools.partial(evaluate, open_recorder=open_recorder,
+                                              save_policy=save_policy))
 
 
 EVO_CODE = EvolveCode()

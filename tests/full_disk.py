@@ -22,7 +22,6 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from evo.evaluation import evaluate
 from evo.learners.common import LearnerConfig, Policy, save_checkpoint
 from evo.main import EvolveCode, cli
 from evo.record import (
@@ -85,10 +84,9 @@ class Disk:
 
     def code(self) -> EvolveCode:
         """The run's code, with every seam that watches writes."""
-        return EvolveCode(
+        return EvolveCode.with_seams(
+            open_recorder=self.open_recorder, save_policy=self.save_policy,
             store=functools.partial(FillingStore, disk=self),
-            evaluate=functools.partial(evaluate, open_recorder=self.open_recorder,
-                                       save_policy=self.save_policy),
         )
 
 
@@ -100,11 +98,9 @@ class FillingStore(RunStore):
         super().__init__(root)
         self.disk = disk
 
-    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
-        if path != self.layout.state:
-            return super().write_json(path, data)
+    def write_state(self, data: dict[str, Any]) -> Path:
         self.disk.fill("state")
-        done = super().write_json(path, data)
+        done = super().write_state(data)
         self.disk.saved(data)
         return done
 

@@ -27,23 +27,33 @@ import scipy.stats
 from analysis.inheritance import main
 from evo.run.records import HistoryRow, RunSummary, write_history, write_run_summary
 
-# (fitness, env steps, inherited_from, operator); a robot enters a population of two
-# when it beats the worst member.
-WITH_0 = [(1.0, 100, "", "random"), (2.0, 100, "", "random"),
-          (3.5, 50, "a", "crossover"), (4.5, 50, "a", "crossover"),
-          (0.5, 100, "", "random-fallback")]
-WITHOUT_0 = [(1.0, 100, "", "random"), (2.0, 100, "", "random"),
-             (3.0, 100, "", "crossover"), (0.5, 100, "", "crossover"),
-             (4.0, 100, "", "crossover")]
-WITH_1 = [(1.0, 100, "", "random"), (1.0, 100, "", "random"),
-          (0.0, 50, "a", "crossover"), (3.0, 50, "a", "crossover"),
-          (0.2, 50, "b", "crossover")]
-WITHOUT_1 = [(1.0, 100, "", "random"), (1.0, 100, "", "random"),
-             (5.0, 100, "", "crossover"), (0.0, 100, "", "crossover"),
-             (2.0, 100, "", "crossover")]
+Spec = list[tuple[float, int, str, str]]
+"""A run's robots in birth order: (fitness, env steps, inherited_from, operator)."""
+
+OPERATORS = {"r": "random", "x": "crossover", "f": "random-fallback"}
 
 
-def history(spec: list[tuple[float, int, str, str]], births: list[int]) -> list[HistoryRow]:
+def parse_runs(table: str) -> dict[str, Spec]:
+    """A run per line: its name, then per robot ``fitness/env steps/inherited_from/operator``
+    (``-``: inherited from none; an operator by its letter in :data:`OPERATORS`)."""
+    runs = {}
+    for line in table.strip().splitlines():
+        name, *robots = line.split()
+        runs[name] = [(float(f), int(steps), "" if parent == "-" else parent, OPERATORS[op])
+                      for f, steps, parent, op in (robot.split("/") for robot in robots)]
+    return runs
+
+
+# A robot enters a population of two when it beats the worst member.
+RUNS = parse_runs("""
+with_0     1.0/100/-/r  2.0/100/-/r  3.5/50/a/x   4.5/50/a/x   0.5/100/-/f
+without_0  1.0/100/-/r  2.0/100/-/r  3.0/100/-/x  0.5/100/-/x  4.0/100/-/x
+with_1     1.0/100/-/r  1.0/100/-/r  0.0/50/a/x   3.0/50/a/x   0.2/50/b/x
+without_1  1.0/100/-/r  1.0/100/-/r  5.0/100/-/x  0.0/100/-/x  2.0/100/-/x
+""")
+
+
+def history(spec: Spec, births: list[int]) -> list[HistoryRow]:
     """History rows of a steady-state GA with a population of two, in ``spec``'s order."""
     population: list[float] = []
     rows = []
@@ -63,7 +73,7 @@ def history(spec: list[tuple[float, int, str, str]], births: list[int]) -> list[
     return rows
 
 
-def make_run(folder: Path, spec: list[tuple[float, int, str, str]], *,
+def make_run(folder: Path, spec: Spec, *,
              config: str | None = None, births: list[int] | None = None) -> Path:
     folder.mkdir(parents=True)
     rows = history(spec, births or list(range(len(spec))))
@@ -78,12 +88,12 @@ def make_run(folder: Path, spec: list[tuple[float, int, str, str]], *,
 @pytest.fixture
 def runs(tmp_path: Path) -> Path:
     root = tmp_path / "inheritance"
-    make_run(root / "a_seed0", WITH_0, births=[0, 1, 3, 2, 4],
+    make_run(root / "a_seed0", RUNS["with_0"], births=[0, 1, 3, 2, 4],
              config="seed: 0\nga:\n  inheritance: parent\n  population_size: 2\n")
-    make_run(root / "b_seed0", WITHOUT_0,
+    make_run(root / "b_seed0", RUNS["without_0"],
              config="seed: 0\nga:\n  inheritance: off\n  population_size: 2\n")
-    make_run(root / "parent_seed1", WITH_1)
-    make_run(root / "off_seed1", WITHOUT_1)
+    make_run(root / "parent_seed1", RUNS["with_1"])
+    make_run(root / "off_seed1", RUNS["without_1"])
     return root
 
 
@@ -171,7 +181,7 @@ def test_acceptance_of_inherited_and_from_scratch_offspring(report: Path) -> Non
 
 def test_a_run_of_unknown_method_or_one_method_alone_is_refused(
         runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    make_run(runs / "other_seed2", WITH_1)
+    make_run(runs / "other_seed2", RUNS["with_1"])
     assert main([str(runs), "--out", str(tmp_path / "o")]) == 2
     assert "other_seed2" in capsys.readouterr().err
     assert main([str(runs / "off_seed1"), "--out", str(tmp_path / "o")]) == 2

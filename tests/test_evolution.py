@@ -311,15 +311,13 @@ class StateWriteCrash(RunStore):
         super().__init__(root)
         self.k, self.torn, self.calls = k, torn, 0
 
-    def write_json(self, path: Path, data: dict[str, Any]) -> Path:
-        if path != self.layout.state:
-            return super().write_json(path, data)
+    def write_state(self, data: dict[str, Any]) -> Path:
         self.calls += 1
         if self.calls == self.k and self.torn:
             text = json.dumps(data)
-            path.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
+            self.layout.state.with_suffix(".json.tmp").write_text(text[: len(text) // 2])
             raise Crash("crash while writing the state")
-        super().write_json(path, data)
+        path = super().write_state(data)
         if self.calls == self.k:
             raise Crash("crash after writing the state")
         return path

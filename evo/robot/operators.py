@@ -361,20 +361,6 @@ class Mutation:
         raise NotImplementedError(f"{type(self).__name__} changes nothing")
 
 
-def _body_nodes(robot: Robot, with_root: bool) -> list[Placed]:
-    return [
-        p
-        for p in walk(robot.root)
-        if p.node.type is not ModuleType.WHEEL and (with_root or p.parent is not None)
-    ]
-
-
-def _random_body_node(robot: Robot, rng: np.random.Generator) -> Placed | None:
-    """A non-root, non-wheel module drawn uniformly (one draw), or None when there is none."""
-    options = _body_nodes(robot, with_root=False)
-    return options[rng.integers(len(options))] if options else None
-
-
 @dataclass(frozen=True, slots=True)
 class AddSubtree(Mutation):
     """Grow a random subtree on a free face of a random module."""
@@ -404,26 +390,36 @@ class AddSubtree(Mutation):
 
 
 @dataclass(frozen=True, slots=True)
-class RemoveSubtree(Mutation):
-    """Remove a random non-root module with everything below it."""
+class _ModuleMutation(Mutation):
+    """A mutation of one non-root, non-wheel module, drawn uniformly (one draw, before any
+    other); None when the robot has no such module."""
 
     def __call__(self, robot: Robot, rng: np.random.Generator,
                  params: GeneratorParams) -> Robot | None:
-        victim = _random_body_node(robot, rng)
-        if victim is None:
+        options = [p for p in walk(robot.root)
+                   if p.node.type is not ModuleType.WHEEL and p.parent is not None]
+        if not options:
             return None
-        return Robot(replace_at(robot.root, victim.path, None))
+        return self.change(robot, options[rng.integers(len(options))], rng)
+
+    def change(self, robot: Robot, target: Placed, rng: np.random.Generator) -> Robot:
+        """``robot`` with ``target`` changed."""
+        raise NotImplementedError(f"{type(self).__name__} changes nothing")
 
 
 @dataclass(frozen=True, slots=True)
-class RotateEdge(Mutation):
+class RemoveSubtree(_ModuleMutation):
+    """Remove a random non-root module with everything below it."""
+
+    def change(self, robot: Robot, target: Placed, rng: np.random.Generator) -> Robot:
+        return Robot(replace_at(robot.root, target.path, None))
+
+
+@dataclass(frozen=True, slots=True)
+class RotateEdge(_ModuleMutation):
     """Turn a random non-wheel module to another rotation about its connection axis."""
 
-    def __call__(self, robot: Robot, rng: np.random.Generator,
-                 params: GeneratorParams) -> Robot | None:
-        target = _random_body_node(robot, rng)
-        if target is None:
-            return None
+    def change(self, robot: Robot, target: Placed, rng: np.random.Generator) -> Robot:
         edge = subtree_at(robot.root, target.path)
         rotations = [r for r in ROTATIONS if r != edge.rotation]
         rotation = rotations[rng.integers(len(rotations))]
@@ -431,18 +427,14 @@ class RotateEdge(Mutation):
 
 
 @dataclass(frozen=True, slots=True)
-class ChangeType(Mutation):
+class ChangeType(_ModuleMutation):
     """Change a random non-root module into another body type, adapting its children.
 
     A new motor gets a fresh wheel pair instead of its children; a new pivot keeps only
     its face-0 child; a new main keeps every child (a motor's wheels become passive).
     """
 
-    def __call__(self, robot: Robot, rng: np.random.Generator,
-                 params: GeneratorParams) -> Robot | None:
-        target = _random_body_node(robot, rng)
-        if target is None:
-            return None
+    def change(self, robot: Robot, target: Placed, rng: np.random.Generator) -> Robot:
         kinds = [t for t in BODY_TYPES if t is not target.node.type]
         kind = kinds[rng.integers(len(kinds))]
         old = target.node.children

@@ -43,8 +43,9 @@ JSONValue: TypeAlias = "None | bool | int | float | str | list[JSONValue] | dict
 """A value of a JSON document as ``json.loads`` gives it."""
 
 JSONObject: TypeAlias = dict[str, JSONValue]
-"""A JSON object whose keys are open (curve metrics, metadata, a JSON Schema); a document
-with known keys is a ``TypedDict`` of its own (``evo.run.records``)."""
+"""A JSON object whose keys are open (curve metrics, metadata, a JSON Schema), or the JSON
+form of a record whose dataclass lists its keys (``record()`` in ``evo.run.records``); a
+document with known keys and no such dataclass is a ``TypedDict`` of its own."""
 
 DISK_FULL = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
 """The ``errno`` of a full disk, a file-size limit (``RLIMIT_FSIZE``) and a full quota."""

@@ -11,6 +11,9 @@
   :func:`read_run_summary`).
 * :class:`TrainSummary`: a one-robot training's ``summary.json`` (``+exp=train``;
   :func:`write_train_summary`, :func:`read_train_summary`).
+
+Each record's JSON form is its ``record()``, a :data:`~evo.run.files.JSONObject` keyed by
+its fields: the dataclass is the one list of the file's keys.
 """
 
 from __future__ import annotations
@@ -21,12 +24,12 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NotRequired, TypedDict, cast
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from evo.run.files import write_csv, write_json
+from evo.run.files import JSONObject, write_csv, write_json
 
 PARENT_SEPARATOR = ";"
 """Joins the parents' names in the ``parents`` cell of history.csv and state.json."""
@@ -35,32 +38,6 @@ STATUSES = ("trained", "stopped-early", "failed")
 """``trained``: its whole budget; ``stopped-early``: early rejection stopped it (it never
 enters the population; ``fitness`` is Eq. 8 over the episodes it completed and
 ``predicted`` the rule's prediction); ``failed``: the evaluation raised (``error``)."""
-
-
-class HistoryRecord(TypedDict):
-    """A :class:`HistoryRow` as ``state.json`` and ``history.csv`` hold it: its fields,
-    ``parents`` joined by :data:`PARENT_SEPARATOR`."""
-
-    birth: int
-    name: str
-    method: str
-    parents: str
-    operator: str
-    budget: int
-    seed: int
-    fitness: float
-    accepted: bool
-    replaced: str
-    env_steps: int
-    episodes: int
-    wall_seconds: float
-    error: str
-    population_best: float
-    population_mean: float
-    status: str
-    predicted: float
-    threshold: float
-    inherited_from: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,11 +106,12 @@ class HistoryRow:
         """Whether early rejection stopped its training."""
         return self.status == "stopped-early"
 
-    def record(self) -> HistoryRecord:
-        """The row as ``state.json`` and ``history.csv`` hold it (``parents`` joined)."""
-        row = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+    def record(self) -> JSONObject:
+        """The row as ``state.json`` and ``history.csv`` hold it: its fields in order
+        (:data:`HISTORY_COLUMNS`), ``parents`` joined by :data:`PARENT_SEPARATOR`."""
+        row: JSONObject = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         row["parents"] = PARENT_SEPARATOR.join(self.parents)
-        return cast(HistoryRecord, row)  # its keys are the fields (tests/test_records.py)
+        return row
 
     @classmethod
     def from_record(cls, row: Mapping[str, Any]) -> HistoryRow:
@@ -202,26 +180,6 @@ def read_history(path: Path) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------- an evolution's summary
-
-
-class RunSummaryRecord(TypedDict):
-    """A :class:`RunSummary` as ``summary.json`` and the run's recordings hold it."""
-
-    method: str
-    robots_evaluated: int
-    robot_budget: int
-    failed: int
-    best_robot: str | None
-    best_fitness: float | None
-    best_initial_fitness: float | None
-    accept_rate: float | None
-    env_steps: int
-    wall_seconds: float
-    steps_per_second: float
-    complete: bool
-    stopped_early: int
-    env_steps_saved: int
-    best_note: str
 
 
 @dataclass(frozen=True)
@@ -297,9 +255,9 @@ class RunSummary:
                 "mean return of unfinished episodes" if best and not finished else ""),
         )
 
-    def record(self) -> RunSummaryRecord:
-        """The summary as ``summary.json`` (and the run's recordings) hold it."""
-        return cast(RunSummaryRecord, dataclasses.asdict(self))
+    def record(self) -> JSONObject:
+        """The summary as ``summary.json`` (and the run's recordings) hold it: its fields."""
+        return dataclasses.asdict(self)
 
 
 def write_run_summary(path: Path, summary: RunSummary) -> Path:
@@ -326,26 +284,6 @@ def read_run_summary(path: Path) -> RunSummary | None:
 
 
 # ---------------------------------------------------------------- a training's summary
-
-
-class TrainSummaryRecord(TypedDict):
-    """A :class:`TrainSummary` as ``summary.json`` holds it (the evaluation's keys only
-    after one)."""
-
-    robot: str
-    seed: int
-    fitness: float
-    env_steps: float
-    learner: str
-    arena: str
-    episodes: int
-    wall_seconds: float
-    steps_per_second: float
-    unstable_episodes: int
-    timing_seconds: dict[str, float]
-    success_rate: NotRequired[float | None]
-    eval_mean_return: NotRequired[float | None]
-    eval_episodes: NotRequired[int | None]
 
 
 @dataclass(frozen=True)
@@ -384,13 +322,14 @@ class TrainSummary:
     eval_mean_return: float | None = None
     eval_episodes: int | None = None
 
-    def record(self) -> TrainSummaryRecord:
-        """The summary as ``summary.json`` holds it (no evaluation keys without one)."""
-        data = dataclasses.asdict(self)
+    def record(self) -> JSONObject:
+        """The summary as ``summary.json`` holds it: its fields, the evaluation's only
+        after one."""
+        data: JSONObject = dataclasses.asdict(self)
         if self.eval_episodes is None:
             for key in ("success_rate", "eval_mean_return", "eval_episodes"):
                 data.pop(key)
-        return cast(TrainSummaryRecord, data)
+        return data
 
 
 def write_train_summary(path: Path, summary: TrainSummary) -> Path:

@@ -7,7 +7,7 @@ files derived from it (``history.csv``, ``population.json``, ``summary.json``).
 writing nothing. The evolution loop is given a store (``evo.evolution.Evolution``), and
 ``python evo/main.py`` makes it through ``evo.main.EvolveCode``: a store that also keeps
 its files elsewhere, or one that fails at a chosen write (as the fault tests do), is a
-subclass that overrides ``save_robot``, ``write_json`` or ``write_history``.
+subclass that overrides ``save_robot``, ``write_state``, ``write_json`` or ``write_history``.
 """
 
 from __future__ import annotations
@@ -113,7 +113,7 @@ class RunStore:
     def save(self, state: SavedState, summary: RunSummary) -> None:
         """Write the state first (atomically), then the files derived from it."""
         population = [{"name": m.name, "fitness": m.fitness} for m in state.population]
-        self.write_json(self.layout.state, {
+        self.write_state({
             "version": STATE_VERSION,
             "seed": state.seed,
             "next_birth": state.next_birth,
@@ -127,6 +127,10 @@ class RunStore:
             self.write_history(state.history)
         self.write_json(self.layout.population, {"population": population})
         write_run_summary(self.layout.summary, summary)
+
+    def write_state(self, data: Mapping[str, object]) -> Path:
+        """Write ``state.json`` atomically (through :meth:`write_json`)."""
+        return self.write_json(self.layout.state, data)
 
     def write_json(self, path: Path, data: Mapping[str, object]) -> Path:
         """Write one of the run's JSON files atomically (``evo.run.files.write_json``)."""
