@@ -7,7 +7,9 @@ MuJoCo's contacts turn the last bit of a difference into another trajectory. A g
 history is therefore exact only where the arithmetic is the one it was recorded with.
 ``fingerprint()`` hashes what such a training computes, without evo's code: a small MLP's
 forward and backward passes and Adam steps, Gaussian samples and their log-probabilities
-(torch), and a body with contacts driven by random controls (MuJoCo). Data that holds
+(torch), and a body with contacts driven by random controls (MuJoCo), with the versions
+of torch and MuJoCo (a new MuJoCo release can move a robot's contacts while this small
+body's stay the same, as 4.0.1 did). Data that holds
 recorded numbers stores the fingerprint of the machine that made it (``numerics.txt``
 beside it); a test compares them exactly where the fingerprints agree and compares
 only what arithmetic cannot change elsewhere. On any machine, ``bench/same_behaviour.py``
@@ -79,7 +81,8 @@ def fingerprint() -> str:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return hashlib.sha256(_torch_bytes() + _mujoco_bytes()).hexdigest()[:16]
+        versions = f"torch {torch.__version__} mujoco {mujoco.__version__}".encode()
+        return hashlib.sha256(versions + _torch_bytes() + _mujoco_bytes()).hexdigest()[:16]
     finally:
         torch.set_num_threads(threads)
 
