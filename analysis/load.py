@@ -50,7 +50,7 @@ import pandas as pd
 from omegaconf import OmegaConf
 
 from analysis.tables import CURVE_COLUMNS, ROBOT_COLUMNS
-from evo.config import structure_letter
+from evo.config import method_label, structure_letter
 from evo.record import read_curve
 from evo.run.layout import HISTORY, TRAININGS, RunLayout
 from evo.run.records import RunSummary, read_run_summary, read_train_summary
@@ -291,8 +291,8 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: RunConfig) -> str:
     summary = _summary(run_dir)
     if summary is not None:
         return summary.method
-    structure = structure_letter(config.ga.get("structure", "E"))
-    return f"{structure}+{'L' if config.learner.get('update', True) else 'R'}"
+    return method_label(structure_letter(config.ga.get("structure", "E")),
+                        bool(config.learner.get("update", True)))
 
 
 def _summary(run_dir: Path) -> RunSummary | None:

@@ -164,6 +164,12 @@ def structure_letter(structure: Any) -> str:
     return str(structure)
 
 
+def method_label(structure: str, learns: bool) -> str:
+    """The ablation's method name (paper section 8): ``E+L``, ``E+R``, ``R+L`` or ``R+R``,
+    from the structure's letter (:func:`structure_letter`) and whether the policy learns."""
+    return f"{structure}+{'L' if learns else 'R'}"
+
+
 OLD_LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo.PPO", "random": "evo.learners.ppo.PPO"}
 """The ``learner.name`` of an older ``config.yaml`` and the class it stands for (its
 ``update`` key, kept, says whether the policy learns)."""

@@ -41,7 +41,7 @@ from omegaconf import DictConfig, OmegaConf
 from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, current, structure_letter, typed
+from evo.config import ConfigError, current, method_label, structure_letter, typed
 from evo.edge import (
     CONF_DIR,
     executor_of,
@@ -126,11 +126,6 @@ def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
                        out=out)
     except ValueError as err:
         raise ConfigError(f"checkpoint: {err}") from None
-
-
-def method_label(structure: str, learns: bool) -> str:
-    """The ablation's method name (paper section 8): ``E+L``, ``E+R``, ``R+L`` or ``R+R``."""
-    return f"{structure}+{'L' if learns else 'R'}"
 
 
 # ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir;
