@@ -69,8 +69,11 @@ def test_one_robot_is_trained_and_evaluated(made: Made) -> None:
     assert curve["env_steps"].tolist() == [256.0, 512.0, 768.0, 1024.0]
     assert (train / ".hydra" / "config.yaml").is_file()
     assert torch.load(train / "policy.pt", weights_only=True)
+    reached = summary["eval_time_to_target"]  # None when no evaluation episode reached it
+    assert (reached is None) == (summary["success_rate"] == 0), summary
     evaluation = json.loads((made.runs["evaluate"] / "summary.json").read_text())
     assert evaluation["episodes"] == 2 and 0 <= evaluation["success_rate"] <= 1
+    assert len(evaluation["lengths"]) == 2 and "time_to_target" in evaluation, evaluation
 
 
 @pytest.mark.parametrize("command", [

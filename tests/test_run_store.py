@@ -82,6 +82,15 @@ def test_summaries_read_back_what_they_wrote(tmp_path: Path) -> None:
     path = write_train_summary(tmp_path / "train.json", training)
     assert read_train_summary(path) == training
     assert "success_rate" not in path.read_text(), "no evaluation, no evaluation keys"
+    assert "eval_time_to_target" not in path.read_text(), "no evaluation, no evaluation keys"
+    evaluated = dataclasses.replace(training, success_rate=0.0, eval_mean_return=-1.0,
+                                    eval_episodes=4)
+    path = write_train_summary(tmp_path / "evaluated.json", evaluated)
+    assert json.loads(path.read_text())["eval_time_to_target"] is None, "none reached it"
+    older = json.loads(path.read_text())
+    del older["eval_time_to_target"]  # a summary written before the key existed
+    (tmp_path / "older.json").write_text(json.dumps(older))
+    assert read_train_summary(tmp_path / "older.json") == evaluated
     (tmp_path / "bad.json").write_text("{")
     with pytest.raises(ValueError, match="bad.json: not readable JSON"):
         read_run_summary(tmp_path / "bad.json")
@@ -99,9 +108,9 @@ def test_each_record_round_trips_through_its_json_form() -> None:
                             learner="ppo", arena="reach", episodes=3, wall_seconds=2.0,
                             steps_per_second=500.0, timing_seconds={"physics": 1.0})
     evaluated = dataclasses.replace(training, success_rate=0.5, eval_mean_return=1.5,
-                                    eval_episodes=4)
+                                    eval_episodes=4, eval_time_to_target=2.25)
     keys = [f.name for f in dataclasses.fields(TrainSummary)]
-    records += [(training, training.record(), keys[:-3]), (evaluated, evaluated.record(), keys)]
+    records += [(training, training.record(), keys[:-4]), (evaluated, evaluated.record(), keys)]
     for record, form, keys in records:
         assert list(form) == keys, f"{type(record).__name__}'s JSON form names {list(form)}"
         back = json.loads(json.dumps(form))

@@ -208,6 +208,12 @@ class ReachCore:
 
     # ---- sizes ---------------------------------------------------------------------------
     @property
+    def control_step(self) -> float:
+        """Seconds of simulated time per control step: the physics timestep times
+        ``task.frame_skip`` (0.005 s x 10 = 0.05 s by default)."""
+        return float(self.model.opt.timestep * self.task.frame_skip)
+
+    @property
     def obs_size(self) -> int:
         """Length of one observation."""
         return observation_size(self.robot, self.task)
@@ -345,7 +351,7 @@ class ReachCore:
             failed[np.asarray(err.ids, dtype=np.intp)] = True
         self.physics_seconds += time.perf_counter() - tick
         self._count_warnings()
-        dt = self.model.opt.timestep * self.task.frame_skip
+        dt = self.control_step
         self.sensordata[:] = self._sensor_out
         unstable: Bools = failed | ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(
             self.qvel).all(axis=1) | ~np.isfinite(self.sensordata).all(axis=1)

@@ -4,8 +4,8 @@
 ``robot.json``, ``curve.csv`` (the learning curve, one row per collector batch),
 ``policy.pt`` (loads with ``torch.load(..., weights_only=True)``) and ``summary.json``
 (``evo.run.records.TrainSummary``: ``fitness``, ``success_rate``, ``eval_mean_return``,
-``env_steps``, ``wall_seconds``, ``steps_per_second`` and more), and shows progress while
-it runs.
+``eval_time_to_target``, ``env_steps``, ``wall_seconds``, ``steps_per_second`` and more),
+and shows progress while it runs.
 """
 
 from __future__ import annotations
@@ -121,7 +121,8 @@ def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
         )
         summary = dataclasses.replace(
             summary, success_rate=evaluation.success_rate,
-            eval_mean_return=evaluation.mean_return, eval_episodes=learner.eval_episodes)
+            eval_mean_return=evaluation.mean_return, eval_episodes=learner.eval_episodes,
+            eval_time_to_target=evaluation.time_to_target)
     return summary
 
 

@@ -305,6 +305,9 @@ class TrainSummary:
         success_rate: Success rate of the deterministic evaluation (None without one).
         eval_mean_return: Its mean return.
         eval_episodes: Its episodes.
+        eval_time_to_target: Its mean simulated seconds to reach the target over the
+            episodes that reached it; None when none did (and in summaries written
+            before the key existed).
     """
 
     robot: str
@@ -321,13 +324,17 @@ class TrainSummary:
     success_rate: float | None = None
     eval_mean_return: float | None = None
     eval_episodes: int | None = None
+    eval_time_to_target: float | None = None
+
+    EVALUATION = ("success_rate", "eval_mean_return", "eval_episodes", "eval_time_to_target")
+    """The keys of the deterministic evaluation, written only after one."""
 
     def record(self) -> JSONObject:
         """The summary as ``summary.json`` holds it: its fields, the evaluation's only
         after one."""
         data: JSONObject = dataclasses.asdict(self)
         if self.eval_episodes is None:
-            for key in ("success_rate", "eval_mean_return", "eval_episodes"):
+            for key in self.EVALUATION:
                 data.pop(key)
         return data
 
@@ -341,6 +348,8 @@ def read_train_summary(path: Path) -> TrainSummary | None:
     """A training's ``summary.json``; None when there is none, or it is another kind of
     summary (an evolution's, an evaluation's: it names no ``robot``, ``seed`` and
     ``fitness``).
+
+    A summary written before ``eval_time_to_target`` existed reads with None there.
 
     Raises:
         ValueError: Naming the file, when it is not readable JSON.

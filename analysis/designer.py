@@ -1,0 +1,660 @@
+"""Evolution against the designer: the best evolved robots and the hand-made ones, each
+retrained from scratch under the same protocol, compared head to head.
+
+    python -m analysis.designer --runs RUN [RUN ...] --out DIR [--robots robots/]
+        [--seeds 3] [--budget 150000] [--arena clean|cluttered] [--jobs 1] [overrides...]
+
+    python -m analysis.designer --runs runs/ablation --out runs/designer --arena clean
+
+``--runs`` takes GA run directories or folders holding them (a Hydra multirun folder);
+each run's best robot (``summary.json``'s ``best_robot``) enters under the run's name
+(``E+L_seed0``). Every robot file of ``--robots`` (default ``robots/``) enters under
+its file name (``four_wheeler``). Each robot is trained with seeds ``0 .. seeds-1``
+exactly as ``python evo/main.py +exp=train robot=FILE seed=S [overrides...]`` trains it
+(the same config, composed with Hydra's compose API, and the same code:
+``evo.learners.session.train_robot``), then evaluated deterministically
+(``learner.eval_episodes`` episodes): its success rate, mean return and mean time to
+target (simulated seconds, over the episodes that reached it). ``--budget`` and
+``--arena`` are short for ``learner.total_steps=`` and ``env=``; any other override
+goes as it would to ``evo/main.py`` (``learner.eval_episodes=50``). Without ``--arena``
+(or ``env=``) the robots train in the arena the GA runs evolved in (their
+``config.yaml``), when they all agree; else in the config's (clean).
+
+Into ``--out``:
+
+* ``trainings/<robot>_seed<s>/``: one ``+exp=train`` run directory per training
+  (``summary.json``, ``policy.pt``, ``curve.csv``, ``robot.json``);
+* ``robots/<robot>.json``: the robots compared; ``settings.json``: the overrides and
+  the resolved config;
+* ``trainings.csv``: one row per finished training;
+* ``comparison.csv``: per robot, the mean over seeds with a 95 % t-interval, and the
+  worst seed, of each metric;
+* ``head_to_head.csv`` and ``comparison.md``: the best evolved robot against the best
+  hand-made one (best: the highest mean evaluation return over seeds), the differences
+  with Welch 95 % intervals over seeds, and a one-line verdict.
+
+Resumable: a training whose ``summary.json`` exists is not run again, so the same
+command continues a stopped comparison (more ``--seeds``, or more runs, add trainings).
+A folder trained under another config is refused. ``--jobs N`` trains N robots at a
+time in separate processes (each with ``+exp=train``'s threads: ``env.nthread=2``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing
+import shlex
+import sys
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+import pandas as pd
+import scipy.stats
+from omegaconf import DictConfig, OmegaConf
+
+from analysis.load import find_run_dirs, run_ids
+from analysis.markdown import fmt_ci, markdown_table, safe_name
+from evo.run.layout import RunLayout, TrainLayout
+from evo.run.records import read_run_summary, read_train_summary
+
+if TYPE_CHECKING:
+    from evo.edge import TrainingParts
+    from evo.robot import Limits, Robot
+
+Origin = Literal["evolved", "designed"]
+METRICS: dict[str, str] = {
+    "success_rate": "higher",
+    "eval_mean_return": "higher",
+    "eval_time_to_target": "lower",
+}
+"""The compared metrics of the deterministic evaluation, and which way is better."""
+TRAINING_COLUMNS = ("robot", "origin", "run", "structure", "seed", "arena", "env_steps",
+                    "fitness", "success_rate", "eval_mean_return", "eval_time_to_target",
+                    "eval_episodes", "wall_seconds")
+"""``trainings.csv``: ``robot`` the label compared (run name or file name), ``run`` the
+GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
+``eval_time_to_target`` simulated seconds (empty when no episode reached the target),
+``wall_seconds`` the training's wall time."""
+CONFIDENCE = 0.95
+TRAININGS, COMPARISON, HEAD_TO_HEAD, REPORT, SETTINGS = (
+    "trainings.csv", "comparison.csv", "head_to_head.csv", "comparison.md", "settings.json")
+"""The files of a comparison folder."""
+
+
+class DesignerError(ValueError):
+    """A bad argument, run directory, robot file or output folder; the message names it."""
+
+
+# ---------------------------------------------------------------- the entrants
+
+
+@dataclass(frozen=True)
+class Entrant:
+    """One robot of the comparison.
+
+    Attributes:
+        label: Its name in the comparison: the GA run's name or the robot file's stem.
+        origin: ``evolved`` (a GA run's best) or ``designed`` (a hand-made file).
+        run: The GA run's directory ("" for a hand-made robot).
+        run_arena: The arena the run evolved in ("" when unknown or hand-made).
+        robot: The robot.
+    """
+
+    label: str
+    origin: Origin
+    run: str
+    run_arena: str
+    robot: Robot
+
+
+def evolved_entrants(paths: Sequence[Path], limits: Limits) -> list[Entrant]:
+    """The best robot of every GA run in ``paths`` (run directories or folders of them),
+    labelled with the run's name.
+
+    Raises:
+        DesignerError: For a path that holds no run, or a run without a best robot.
+    """
+    from evo.robot import InvalidRobotError, RobotFileError, load_robot
+
+    if not paths:
+        return []
+    try:
+        dirs = find_run_dirs(paths)
+        summaries = [read_run_summary(RunLayout(d).summary) for d in dirs]
+    except (OSError, ValueError) as err:
+        raise DesignerError(f"--runs: {err}") from None
+    entrants = []
+    for run_dir, label, summary in zip(dirs, run_ids(dirs), summaries, strict=True):
+        if summary is None or summary.best_robot is None:
+            raise DesignerError(f"--runs: {RunLayout(run_dir).summary} names no best_robot "
+                                "(no robot trained yet?)")
+        try:
+            robot = load_robot(RunLayout(run_dir).robot(summary.best_robot), limits)
+        except (RobotFileError, InvalidRobotError) as err:
+            raise DesignerError(f"--runs: {err}") from None
+        entrants.append(Entrant(label, "evolved", str(run_dir), _run_arena(run_dir), robot))
+    return entrants
+
+
+def _run_arena(run_dir: Path) -> str:
+    """``env.name`` of a run's ``config.yaml``; "" when it does not say."""
+    path = RunLayout(run_dir).config
+    try:
+        name = OmegaConf.select(OmegaConf.load(path), "env.name") if path.is_file() else None
+    except Exception:  # noqa: BLE001 - an unreadable config only loses the label
+        name = None
+    return "" if name is None else str(name)
+
+
+def designed_entrants(folder: Path, limits: Limits) -> list[Entrant]:
+    """Every ``*.json`` robot file of ``folder``, labelled with its file name.
+
+    Raises:
+        DesignerError: For a missing or empty folder, or a file that is not a valid robot.
+    """
+    from evo.robot import InvalidRobotError, RobotFileError, load_robot
+
+    if not folder.is_dir():
+        raise DesignerError(f"--robots {folder}: no such folder")
+    files = sorted(folder.glob("*.json"))
+    if not files:
+        raise DesignerError(f"--robots {folder}: no robot files (*.json) in it")
+    try:
+        return [Entrant(path.stem, "designed", "", "", load_robot(path, limits))
+                for path in files]
+    except (RobotFileError, InvalidRobotError) as err:
+        raise DesignerError(f"--robots: {err}") from None
+
+
+def check_labels(entrants: Sequence[Entrant]) -> None:
+    """Refuse two robots under one label (a run and a file of the same name)."""
+    seen: dict[str, Entrant] = {}
+    for entrant in entrants:
+        if entrant.label in seen:
+            raise DesignerError(
+                f"two robots are named {entrant.label!r} ({seen[entrant.label].origin} and "
+                f"{entrant.origin}); rename the run directory or the robot file")
+        seen[entrant.label] = entrant
+
+
+# ---------------------------------------------------------------- the folder
+
+
+def training_dir(out: Path, label: str, seed: int) -> Path:
+    """``<out>/trainings/<robot>_seed<s>/``: one training's ``+exp=train`` directory."""
+    return out / "trainings" / f"{safe_name(label)}_seed{seed}"
+
+
+def open_folder(out: Path, cfg: DictConfig, overrides: Sequence[str]) -> None:
+    """Create ``out`` or continue it; refuse a folder trained under another config
+    (compared by what decides a training's numbers: ``evo.edge.what_trains``)."""
+    from evo.edge import settings_config, what_trains
+
+    if out.exists() and not out.is_dir():
+        raise DesignerError(f"--out {out}: exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    path, config = out / SETTINGS, settings_config(cfg)
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if what_trains(str(stored.get("config"))) != what_trains(config):
+            raise DesignerError(
+                f"--out {out}: its trainings ran under another config (overrides "
+                f"{' '.join(stored.get('overrides', [])) or 'none'}); give the same "
+                "overrides to continue it, or another --out")
+    path.write_text(json.dumps({"overrides": list(overrides), "config": config}, indent=2)
+                    + "\n")
+
+
+# ---------------------------------------------------------------- the trainings
+
+
+@dataclass(frozen=True)
+class Training:
+    """One training to run: the robot's file (saved in the folder), its seed, where."""
+
+    label: str
+    robot_file: Path
+    seed: int
+    out: Path
+
+
+def plan(out: Path, entrants: Sequence[Entrant], seeds: int) -> list[Training]:
+    """Every (robot, seed) training whose ``summary.json`` is not there yet; the robots
+    are saved in ``<out>/robots/`` first."""
+    from evo.robot.io import save_robot
+
+    todo = []
+    for entrant in entrants:
+        robot_file = out / "robots" / f"{safe_name(entrant.label)}.json"
+        robot_file.parent.mkdir(parents=True, exist_ok=True)
+        save_robot(entrant.robot, robot_file)
+        todo += [Training(entrant.label, robot_file, s, training_dir(out, entrant.label, s))
+                 for s in range(seeds)
+                 if not TrainLayout(training_dir(out, entrant.label, s)).summary.is_file()]
+    return todo
+
+
+def train_one(training: Training, parts: TrainingParts, limits: Limits, threads: int,
+              quiet: bool) -> str:
+    """Train one robot as ``+exp=train`` does (``evo.learners.session.train_robot``),
+    on ``threads`` torch threads; a top-level function, so a worker process runs it.
+
+    Returns:
+        The training's label and seed, for the log.
+    """
+    import torch
+    from rich.console import Console
+
+    from evo.learners.session import train_robot
+    from evo.robot import load_robot
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        train_robot(load_robot(training.robot_file, limits), parts, seed=training.seed,
+                    out=training.out, console=Console(quiet=quiet))
+    finally:
+        torch.set_num_threads(before)
+    return f"{training.label} seed {training.seed}"
+
+
+def run_trainings(todo: Sequence[Training], parts: TrainingParts, limits: Limits, *,
+                  threads: int, jobs: int, log: Callable[[str], None] = print) -> list[str]:
+    """Run ``todo``, ``jobs`` at a time (in this process when 1); a training that fails
+    is reported through ``log`` and left for the next call.
+
+    Returns:
+        What failed, one line each.
+    """
+    failed: list[str] = []
+    if jobs <= 1:
+        for training in todo:
+            try:
+                log(f"done: {train_one(training, parts, limits, threads, quiet=False)}")
+            except Exception as err:  # noqa: BLE001 - the others still train
+                failed.append(f"{training.label} seed {training.seed}: {err!r}")
+                log(f"failed: {failed[-1]}")
+        return failed
+    context = multiprocessing.get_context("spawn")  # no forked torch or MuJoCo state
+    with ProcessPoolExecutor(jobs, mp_context=context) as pool:
+        futures = {pool.submit(train_one, t, parts, limits, threads, True): t for t in todo}
+        for future in as_completed(futures):
+            training = futures[future]
+            try:
+                log(f"done: {future.result()}")
+            except Exception as err:  # noqa: BLE001 - the others still train
+                failed.append(f"{training.label} seed {training.seed}: {err!r}")
+                log(f"failed: {failed[-1]}")
+    return failed
+
+
+def collect(out: Path, entrants: Sequence[Entrant], seeds: int) -> pd.DataFrame:
+    """``trainings.csv``'s table: one row per finished training of ``entrants``."""
+    rows = []
+    for entrant in entrants:
+        for seed in range(seeds):
+            summary = read_train_summary(TrainLayout(training_dir(out, entrant.label, seed))
+                                         .summary)
+            if summary is None:
+                continue
+            ttt = summary.eval_time_to_target
+            rows.append(dict(
+                robot=entrant.label, origin=entrant.origin, run=entrant.run,
+                structure=entrant.robot.name, seed=seed, arena=summary.arena,
+                env_steps=summary.env_steps, fitness=summary.fitness,
+                success_rate=summary.success_rate, eval_mean_return=summary.eval_mean_return,
+                eval_time_to_target=math.nan if ttt is None else ttt,
+                eval_episodes=summary.eval_episodes, wall_seconds=summary.wall_seconds))
+    return pd.DataFrame(rows, columns=list(TRAINING_COLUMNS))
+
+
+# ---------------------------------------------------------------- statistics
+
+
+def mean_ci(values: Sequence[float] | np.ndarray) -> tuple[float, float, float, int]:
+    """The mean of the finite ``values`` with its 95 % t-interval over them.
+
+    Returns:
+        ``(mean, low, high, n)``; the interval is NaN for fewer than 2 values, and the
+        mean itself when they are all equal (scipy gives no interval of zero width).
+    """
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) == 0:
+        return math.nan, math.nan, math.nan, 0
+    mean = float(x.mean())
+    if len(x) < 2:
+        return mean, math.nan, math.nan, 1
+    if np.ptp(x) == 0:
+        return mean, mean, mean, len(x)
+    ci = scipy.stats.ttest_1samp(x, 0.0).confidence_interval(CONFIDENCE)
+    return mean, float(ci.low), float(ci.high), len(x)
+
+
+def welch_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray
+                     ) -> tuple[float, float, float]:
+    """``mean(a) − mean(b)`` over the finite values, with Welch's 95 % interval.
+
+    Returns:
+        ``(difference, low, high)``; the interval is NaN when a side has fewer than 2
+        values, and the difference itself when neither side varies.
+    """
+    x, y = (np.asarray(v, dtype=float) for v in (a, b))
+    x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+    if len(x) == 0 or len(y) == 0:
+        return math.nan, math.nan, math.nan
+    diff = float(x.mean() - y.mean())
+    if len(x) < 2 or len(y) < 2:
+        return diff, math.nan, math.nan
+    if np.ptp(x) == 0 and np.ptp(y) == 0:
+        return diff, diff, diff
+    ci = scipy.stats.ttest_ind(x, y, equal_var=False).confidence_interval(CONFIDENCE)
+    return diff, float(ci.low), float(ci.high)
+
+
+def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
+    """Per robot, the mean over seeds with its 95 % t-interval and the worst seed of
+    each metric (:data:`METRICS`), best mean evaluation return first.
+
+    ``<metric>_seeds`` counts the seeds with a value: for the time to target, the seeds
+    under which some evaluation episode reached the target.
+    """
+    rows = []
+    for (robot, origin), group in trainings.groupby(["robot", "origin"], sort=False):
+        row: dict[str, object] = {"robot": robot, "origin": origin,
+                                  "run": group["run"].iloc[0],
+                                  "structure": group["structure"].iloc[0],
+                                  "seeds": len(group)}
+        for metric, better in METRICS.items():
+            mean, low, high, n = mean_ci(group[metric].to_numpy(dtype=float))
+            values = group[metric].to_numpy(dtype=float)
+            worst = (np.nanmin if better == "higher" else np.nanmax)(values) if n else math.nan
+            row |= {f"{metric}_mean": mean, f"{metric}_low": low, f"{metric}_high": high,
+                    f"{metric}_worst": float(worst), f"{metric}_seeds": n}
+        row["fitness_mean"] = float(group["fitness"].mean())
+        row["wall_seconds_mean"] = float(group["wall_seconds"].mean())
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return table
+    return table.sort_values("eval_mean_return_mean", ascending=False, kind="stable",
+                             ignore_index=True)
+
+
+def best_of(comparison: pd.DataFrame, origin: Origin) -> str | None:
+    """The robot of ``origin`` with the highest mean evaluation return; None if none."""
+    rows = comparison[comparison["origin"] == origin]
+    return None if rows.empty else str(rows.iloc[0]["robot"])  # sorted best first
+
+
+def head_to_head(trainings: pd.DataFrame, evolved: str, designed: str) -> pd.DataFrame:
+    """``evolved`` against ``designed`` on every metric: the means, the difference
+    (evolved − designed) with Welch's 95 % interval over seeds, and which is better."""
+    rows = []
+    for metric, better in METRICS.items():
+        a = trainings.loc[trainings["robot"] == evolved, metric].to_numpy(dtype=float)
+        b = trainings.loc[trainings["robot"] == designed, metric].to_numpy(dtype=float)
+        diff, low, high = welch_difference(a, b)
+        clear = low > 0 if better == "higher" else high < 0  # False for a NaN interval
+        rows.append(dict(metric=metric, better=better, evolved=float(np.nanmean(a))
+                         if np.isfinite(a).any() else math.nan,
+                         designed=float(np.nanmean(b)) if np.isfinite(b).any() else math.nan,
+                         difference=diff, low=low, high=high, evolved_clearly_better=clear))
+    return pd.DataFrame(rows)
+
+
+def _by(row: pd.Series) -> str:
+    """A difference with its interval: ``+0.120 [+0.050, +0.190]``."""
+    diff, low, high = float(row["difference"]), float(row["low"]), float(row["high"])
+    return f"{diff:+.3f} [{low:+.3f}, {high:+.3f}]" if not math.isnan(low) else f"{diff:+.3f}"
+
+
+def verdict(duel: pd.DataFrame, evolved: str, designed: str, arena: str) -> str:
+    """One line: whether ``evolved`` beats ``designed`` on mean evaluation return (its
+    Welch interval above 0), and by how much (and the success rate's difference)."""
+    rows = duel.set_index("metric")
+    row = rows.loc["eval_mean_return"]
+    low, high = float(row["low"]), float(row["high"])
+    if not math.isnan(low) and low > 0:
+        word = "beats"
+    elif not math.isnan(high) and high < 0:
+        word = "does not beat (it is beaten by)"
+    else:
+        word = "does not clearly beat"
+    return (f"{evolved} (evolved) {word} {designed} (hand-made) in the {arena} arena: "
+            f"evaluation return {_by(row)}, success rate {_by(rows.loc['success_rate'])} "
+            "(evolved − hand-made, Welch 95 % CI over seeds)")
+
+
+# ---------------------------------------------------------------- the report
+
+
+@dataclass(frozen=True)
+class Report:
+    """What a comparison folder's report is written from."""
+
+    trainings: pd.DataFrame
+    comparison: pd.DataFrame
+    duel: pd.DataFrame | None
+    verdict: str
+    arena: str
+    budget: int
+    seeds: int
+    command: str
+    notes: tuple[str, ...]
+
+
+def build_report(trainings: pd.DataFrame, *, arena: str, budget: int, seeds: int,
+                 command: str, notes: Sequence[str] = ()) -> Report:
+    """The per-robot table, the head-to-head of the best of each origin and its verdict."""
+    comparison = comparison_table(trainings)
+    evolved = best_of(comparison, "evolved") if not comparison.empty else None
+    designed = best_of(comparison, "designed") if not comparison.empty else None
+    if evolved is None or designed is None:
+        missing = "evolved" if evolved is None else "hand-made"
+        return Report(trainings, comparison, None, f"no head-to-head: no {missing} robot "
+                      "has a finished training", arena, budget, seeds, command, tuple(notes))
+    duel = head_to_head(trainings, evolved, designed)
+    return Report(trainings, comparison, duel, verdict(duel, evolved, designed, arena), arena,
+                  budget, seeds, command, tuple(notes))
+
+
+def write_report(out: Path, report: Report) -> Path:
+    """``trainings.csv``, ``comparison.csv``, ``head_to_head.csv`` and ``comparison.md``.
+
+    Returns:
+        The path of ``comparison.md``.
+    """
+    from evo.run.files import write_csv, write_text
+
+    write_csv(out / TRAININGS, report.trainings)
+    write_csv(out / COMPARISON, report.comparison)
+    if report.duel is not None:
+        write_csv(out / HEAD_TO_HEAD, report.duel)
+    write_text(out / REPORT, _markdown(report))
+    return out / REPORT
+
+
+def _per_robot_markdown(comparison: pd.DataFrame) -> pd.DataFrame:
+    """The per-robot table as the report shows it: estimates with their intervals."""
+    shown = pd.DataFrame({"robot": comparison["robot"], "origin": comparison["origin"],
+                          "seeds": comparison["seeds"]})
+    for metric, title in (("success_rate", "success"), ("eval_mean_return", "eval return"),
+                          ("eval_time_to_target", "time to target (s)")):
+        shown[title] = [fmt_ci(r[f"{metric}_mean"], r[f"{metric}_low"], r[f"{metric}_high"])
+                        for _, r in comparison.iterrows()]
+        shown[f"worst {title}"] = comparison[f"{metric}_worst"]
+    shown["seeds reaching"] = comparison["eval_time_to_target_seeds"]
+    return shown
+
+
+def _markdown(report: Report) -> str:
+    """``comparison.md``."""
+    lines = [
+        "# Evolution against the designer\n",
+        f"`{report.command}`\n",
+        f"Every robot retrained from scratch as `+exp=train` does, in the **{report.arena}** "
+        f"arena, {report.budget:,} env steps per training, seeds 0..{report.seeds - 1}; "
+        "each training then evaluated deterministically (the policy's mean action). Per "
+        "robot: the mean over seeds with its 95 % t-interval over seeds, and the worst "
+        "seed. Time to target: mean simulated seconds to reach the target over the "
+        "evaluation episodes that reached it, averaged over the seeds under which some "
+        "episode did (`seeds reaching`).\n",
+        "## Per robot (best mean evaluation return first)\n",
+        markdown_table(_per_robot_markdown(report.comparison)) if not report.comparison.empty
+        else "_(no training finished yet)_\n",
+        "## Head to head\n",
+    ]
+    if report.duel is not None:
+        lines += [
+            "The best evolved robot against the best hand-made one, best meaning the "
+            "highest mean evaluation return over seeds. Differences are evolved − hand-made "
+            "with Welch 95 % intervals over seeds (for the time to target, lower is "
+            "better).\n",
+            markdown_table(report.duel),
+        ]
+    lines += [
+        f"**Verdict:** {report.verdict}.\n",
+        "Selection bias: each side's best is the robot that did best in these same "
+        "retrainings, so its mean is biased upwards (the more robots a side has, the more "
+        "so), and the interval of the difference does not account for the choice. A "
+        "confirmation would retrain the two chosen robots under fresh seeds.\n",
+    ]
+    if report.notes:
+        lines += ["## Notes\n", *(f"- {note}" for note in report.notes), ""]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------- CLI
+
+
+@dataclass(frozen=True)
+class Options:
+    """The command line's settings."""
+
+    runs: tuple[Path, ...]
+    robots: Path
+    out: Path
+    seeds: int
+    jobs: int
+    overrides: tuple[str, ...]
+
+
+def parse_args(argv: Sequence[str] | None) -> Options:
+    cli = argparse.ArgumentParser(
+        prog="python -m analysis.designer",
+        description="Retrain the best robot of each GA run and every hand-made robot "
+                    "under +exp=train's protocol with several seeds, and compare them.")
+    cli.add_argument("--runs", type=Path, nargs="*", default=[],
+                     help="GA run directories or folders of them (their best robots)")
+    cli.add_argument("--robots", type=Path, default=Path("robots"),
+                     help="folder of hand-made evo.robot/1 files (default: robots/)")
+    cli.add_argument("--out", type=Path, required=True, help="output folder")
+    cli.add_argument("--seeds", type=int, default=3, help="trainings per robot (seeds 0..S-1)")
+    cli.add_argument("--budget", type=int, default=None,
+                     help="env steps per training (learner.total_steps; +exp=train: 150000)")
+    cli.add_argument("--arena", choices=("clean", "cluttered"), default=None,
+                     help="the arena (env=...; default: the one the runs evolved in, "
+                          "else the config's: clean)")
+    cli.add_argument("--jobs", type=int, default=1, help="trainings run at a time")
+    cli.add_argument("overrides", nargs="*",
+                     help="config overrides as for python evo/main.py +exp=train")
+    args = cli.parse_args(argv)
+    if args.seeds < 2:
+        cli.error(f"--seeds: expected at least 2 (an interval over seeds), got {args.seeds}")
+    if args.jobs < 1:
+        cli.error(f"--jobs: expected at least 1, got {args.jobs}")
+    if args.budget is not None and args.budget < 1:
+        cli.error(f"--budget: expected a positive env-step count, got {args.budget}")
+    overrides = [*(["env=" + args.arena] if args.arena else []),
+                 *([f"learner.total_steps={args.budget}"] if args.budget else []),
+                 *args.overrides]
+    return Options(tuple(args.runs), args.robots, args.out, args.seeds, args.jobs,
+                   tuple(overrides))
+
+
+def compare(options: Options, *, command: str, log: Callable[[str], None] = print) -> Report:
+    """Train what is missing in ``options.out`` and write the report there.
+
+    Raises:
+        DesignerError: For a bad argument, run, robot file or folder (named).
+        evo.config.ConfigError: For a bad override (its key named).
+    """
+    from evo.edge import compose_config, limits_of, training_parts, warn_if_failures_cannot_end
+
+    overrides = ["+exp=train", *options.overrides, *runs_arena(options)]
+    cfg = compose_config(overrides)
+    parts, limits = training_parts(cfg), limits_of(cfg)
+    budget = parts.learner.total_steps
+    warn_if_failures_cannot_end(budget, "learner.total_steps", parts.learner, parts.env)
+    entrants = [*evolved_entrants(options.runs, limits),
+                *designed_entrants(options.robots, limits)]
+    check_labels(entrants)
+    open_folder(options.out, cfg, overrides)
+    todo = plan(options.out, entrants, options.seeds)
+    log(f"{len(entrants) * options.seeds - len(todo)} of {len(entrants) * options.seeds} "
+        f"trainings already done; {len(todo)} to run")
+    failed = run_trainings(todo, parts, limits, threads=int(cfg.torch_threads),
+                           jobs=options.jobs, log=log)
+    arena = parts.env.name
+    notes = [f"{e.label} evolved in the {e.run_arena} arena, not the {arena} one"
+             for e in entrants if e.run_arena and e.run_arena != arena]
+    notes += [f"failed (run the same command again to retry): {f}" for f in failed]
+    report = build_report(collect(options.out, entrants, options.seeds), arena=arena,
+                          budget=budget, seeds=options.seeds, command=command, notes=notes)
+    write_report(options.out, report)
+    return report
+
+
+def runs_arena(options: Options, log: Callable[[str], None] = print) -> list[str]:
+    """``env=<arena>`` of the GA runs when no override chooses the env and every run
+    evolved in the same arena of ``conf/env``; nothing otherwise."""
+    from evo.edge import CONF_DIR
+
+    if not options.runs or any(o.startswith(("env=", "+env=")) for o in options.overrides):
+        return []
+    try:
+        arenas = {_run_arena(d) for d in find_run_dirs(options.runs)}
+    except (OSError, ValueError) as err:
+        raise DesignerError(f"--runs: {err}") from None
+    arena = arenas.pop() if len(arenas) == 1 else ""
+    if not (arena and (CONF_DIR / "env" / f"{arena}.yaml").is_file()):
+        return []
+    log(f"arena: {arena}, where the runs evolved (--arena to choose another)")
+    return [f"env={arena}"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the comparison; exit 0, 2 with one line naming a bad argument, config key or
+    folder in use, 1 when a training failed (the report holds the others), 130 when
+    interrupted (run the same command again to continue)."""
+    from evo.config import ConfigError
+    from evo.run.files import RunDirectoryBusy, RunLock
+
+    options = parse_args(argv)
+    command = "python -m analysis.designer " + shlex.join(
+        sys.argv[1:] if argv is None else list(argv))
+    try:
+        options.out.mkdir(parents=True, exist_ok=True)
+        with RunLock(options.out) as lock:
+            lock.claim()
+            report = compare(options, command=command)
+    except (DesignerError, ConfigError, RunDirectoryBusy) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"interrupted; {options.out} is incomplete: run the same command again to "
+              "continue it", file=sys.stderr)
+        return 130
+    print(f"{report.verdict}\nreport: {options.out / REPORT}")
+    return 1 if any(n.startswith("failed") for n in report.notes) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

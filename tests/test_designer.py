@@ -1,0 +1,168 @@
+"""Evolution against the designer (``analysis.designer``) and the time to target of the
+deterministic evaluation (``evo.learners.rollouts.evaluate_policy``).
+
+The comparison runs end to end on a tiny budget with real PPO and MuJoCo: two hand-made
+robots and the best robot of a GA run directory made from a robot file, two seeds each.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from analysis.designer import main, mean_ci, welch_difference
+from evo.envs.params import EnvConfig, TaskParams
+from evo.learners.rollouts import PolicyEvaluation, evaluate_policy
+from evo.robot import load_robot, save_robot
+from evo.robot.builder import PhysicsParams
+from evo.run.layout import RunLayout
+from evo.run.records import HistoryRow, RunSummary, write_history, write_run_summary
+
+REPO = Path(__file__).resolve().parents[1]
+FOUR_WHEELER = load_robot(REPO / "robots" / "four_wheeler.json")
+TINY = ["learner.total_steps=512", "learner.num_envs=4", "learner.rollout_steps=32",
+        "learner.minibatch_size=64", "learner.epochs=1", "learner.eval_episodes=3",
+        "env.task.t_max=40", "env.nthread=1"]
+"""Overrides of ``+exp=train`` for a training of about a second: 4 batches of 128 env
+steps, 40-step episodes (so failed ones end), 3 evaluation episodes."""
+
+
+class StandStill:
+    """A policy whose mean action is zero: the robot does not move."""
+
+    def mean_action(self, observation: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(observation.shape[0], FOUR_WHEELER.n_actuators)
+
+
+def test_time_to_target_counts_the_episodes_that_reached_it() -> None:
+    at_start = EnvConfig(task=TaskParams(t_max=40, target_min=0.0, target_max=0.0))
+    reached = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(), env=at_start,
+                              episodes=3, seed=0)  # type: ignore[arg-type]
+    assert reached.successes == (True,) * 3 and reached.lengths == (1,) * 3, reached
+    assert reached.time_to_target == pytest.approx(0.005 * 10), "one control step of 0.05 s"
+    far = EnvConfig(task=TaskParams(t_max=40))
+    missed = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(), env=far,
+                             episodes=3, seed=0)  # type: ignore[arg-type]
+    assert missed.success_rate == 0 and missed.lengths == (40,) * 3, missed
+    assert missed.time_to_target is None, "no episode reached the target"
+    assert missed.summary()["time_to_target"] is None and missed.summary()["lengths"] == [40] * 3
+    coarse = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(timestep=0.01),
+                             env=EnvConfig(task=TaskParams(t_max=40, frame_skip=5,
+                                                           target_min=0.0, target_max=0.0)),
+                             episodes=1, seed=0)  # type: ignore[arg-type]
+    assert coarse.control_step == pytest.approx(0.05), "timestep x frame_skip"
+    mixed = PolicyEvaluation(0.5, 0.0, (0.0, 0.0, 0.0), lengths=(10, 40, 30),
+                             successes=(True, False, True), control_step=0.05)
+    assert mixed.time_to_target == pytest.approx((10 + 30) / 2 * 0.05), "failures left out"
+
+
+def test_intervals_hold_their_estimate_and_degenerate_cases_say_so() -> None:
+    mean, low, high, n = mean_ci([1.0, 2.0, 4.0, math.nan])
+    assert (mean, n) == (pytest.approx(7 / 3), 3) and low < mean < high
+    assert mean_ci([0.5, 0.5]) == (0.5, 0.5, 0.5, 2), "no spread: a zero-width interval"
+    assert math.isnan(mean_ci([0.5])[1]) and mean_ci([math.nan])[3] == 0
+    diff, low, high = welch_difference([1.0, 1.2, 1.1], [0.0, 0.1, 0.05])
+    assert diff == pytest.approx(1.1 - 0.05) and low < diff < high
+    assert low > 0, "a clear difference's interval lies above 0"
+    assert math.isnan(welch_difference([1.0], [0.0, 1.0])[1]), "one seed: no interval"
+
+
+def synthetic_run(run_dir: Path, robot_file: Path) -> str:
+    """A GA run directory whose best robot is ``robot_file``'s robot: config, history,
+    summary and robot file as an evolution writes them. Returns the robot's name."""
+    robot = load_robot(robot_file)
+    layout = RunLayout(run_dir)
+    save_robot(robot, layout.robot(robot.name))
+    layout.config.write_text("env:\n  name: cluttered\nseed: 0\n")
+    row = HistoryRow(birth=0, name=robot.name, method="E+L", parents=(), operator="random",
+                     budget=2048, seed=1, fitness=0.5, accepted=True, replaced="",
+                     env_steps=2048, episodes=3, wall_seconds=1.0, error="",
+                     population_best=0.5, population_mean=0.5, status="trained",
+                     predicted=math.nan)
+    write_history(layout.history, [row])
+    write_run_summary(layout.summary, RunSummary.of([row], method="E+L", robot_budget=1,
+                                                    wall_seconds=1.0))
+    return robot.name
+
+
+@pytest.fixture(scope="module")
+def comparison(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
+    """A finished tiny comparison: its folder and its command line."""
+    root = tmp_path_factory.mktemp("designer")
+    robots = root / "hand_made"
+    robots.mkdir()
+    for name in ("four_wheeler", "twisted_four_wheeler"):
+        shutil.copy(REPO / "robots" / f"{name}.json", robots / f"{name}.json")
+    synthetic_run(root / "runs" / "E+L_seed0", REPO / "robots" / "inchworm.json")
+    argv = ["--runs", str(root / "runs"), "--robots", str(robots), "--out", str(root / "out"),
+            "--seeds", "2", *TINY]  # the arena: the run's (its config.yaml's env.name)
+    assert main(argv) == 0
+    return root / "out", argv
+
+
+def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
+        comparison: tuple[Path, list[str]]) -> None:
+    out, _ = comparison
+    trainings = pd.read_csv(out / "trainings.csv")
+    assert sorted(zip(trainings["robot"], trainings["seed"], strict=True)) == [
+        (robot, seed) for robot in ("E+L_seed0", "four_wheeler", "twisted_four_wheeler")
+        for seed in (0, 1)], "one row per robot and seed"
+    origins = trainings.groupby("robot")["origin"].first().to_dict()
+    assert origins == {"E+L_seed0": "evolved", "four_wheeler": "designed",
+                       "twisted_four_wheeler": "designed"}
+    assert (trainings["arena"] == "cluttered").all() and (trainings["eval_episodes"] == 3).all()
+    assert (trainings["env_steps"] >= 512).all() and trainings["success_rate"].between(0, 1).all()
+    for row in trainings.itertuples():
+        summary = json.loads((out / "trainings" / f"{row.robot}_seed{row.seed}"
+                              / "summary.json").read_text())
+        assert summary["eval_mean_return"] == pytest.approx(row.eval_mean_return)
+        ttt = summary["eval_time_to_target"]
+        assert (ttt is None) == (summary["success_rate"] == 0), summary
+        assert ttt is None or 0 < ttt <= 40 * 0.05, "within the episode's 40 steps of 0.05 s"
+
+    table = pd.read_csv(out / "comparison.csv")
+    assert list(table["eval_mean_return_mean"]) == sorted(table["eval_mean_return_mean"],
+                                                          reverse=True), "best first"
+    for metric in ("success_rate", "eval_mean_return", "eval_time_to_target"):
+        mean, low, high = (table[f"{metric}_{k}"] for k in ("mean", "low", "high"))
+        shown = low.notna()
+        assert ((low[shown] <= mean[shown] + 1e-12) & (mean[shown] <= high[shown] + 1e-12)).all()
+    per_robot = trainings.groupby("robot")["eval_mean_return"]
+    means = table.set_index("robot")["eval_mean_return_mean"]
+    assert np.allclose(means.sort_index(), per_robot.mean().sort_index())
+    worst = table.set_index("robot")["success_rate_worst"]
+    assert np.allclose(worst.sort_index(), trainings.groupby("robot")["success_rate"].min())
+
+    duel = pd.read_csv(out / "head_to_head.csv").set_index("metric")
+    best_designed = table[table["origin"] == "designed"].iloc[0]["robot"]
+    evolved, designed = (trainings[trainings["robot"] == r] for r in ("E+L_seed0", best_designed))
+    assert duel.loc["eval_mean_return", "difference"] == pytest.approx(
+        evolved["eval_mean_return"].mean() - designed["eval_mean_return"].mean())
+    report = (out / "comparison.md").read_text()
+    assert "E+L_seed0 (evolved)" in report and f"{best_designed} (hand-made)" in report
+    assert "**Verdict:**" in report and "Selection bias" in report
+
+
+def test_a_rerun_skips_finished_trainings_and_refuses_another_config(
+        comparison: tuple[Path, list[str]], capsys: pytest.CaptureFixture[str]) -> None:
+    out, argv = comparison
+    summaries = sorted((out / "trainings").glob("*/summary.json"))
+    stamps = {p: p.stat().st_mtime_ns for p in summaries}
+    redo = out / "trainings" / "four_wheeler_seed1" / "summary.json"
+    redo.unlink()
+    capsys.readouterr()
+    assert main([*argv, "--jobs", "2"]) == 0
+    assert "5 of 6 trainings already done; 1 to run" in capsys.readouterr().out
+    assert redo.is_file(), "the missing training ran again"
+    assert all(p.stat().st_mtime_ns == stamps[p] for p in summaries if p != redo), \
+        "a finished training was trained again"
+    assert len(pd.read_csv(out / "trainings.csv")) == 6
+    assert main([*argv, "learner.lr=0.5"]) == 2
+    assert "another config" in capsys.readouterr().err
