@@ -292,7 +292,8 @@ def run_method(run_dir: Path, history: pd.DataFrame, config: RunConfig) -> str:
     if summary is not None:
         return summary.method
     return method_label(structure_letter(config.ga.get("structure", "E")),
-                        bool(config.learner.get("update", True)))
+                        bool(config.learner.get("update", True)),
+                        config.ga.get("inheritance", "off"))
 
 
 def _summary(run_dir: Path) -> RunSummary | None:

@@ -9,7 +9,8 @@ effect). This module answers the ablation's questions with the run as the unit:
   robot and the mean of its final population (the steady-state replay of
   :mod:`analysis.population`).
 * :func:`run_level_tests`: per question (:data:`PAIRS` and the interaction of
-  :data:`INTERACTION`), a Welch t-test on one summary per run, Holm over the pairs.
+  :data:`INTERACTION`, then :data:`EXTRA_PAIRS`), a Welch t-test on one summary per
+  run, Holm over the paper's pairs only.
   Welch, not Mann–Whitney: with three runs against three a rank test cannot go below
   p = 0.1, and the per-method spread of run means differs by a factor of ten or more
   between the methods, which the pooled t-test would ignore.
@@ -47,6 +48,11 @@ PAIRS: tuple[tuple[str, str], ...] = (("E+L", "R+L"), ("R+L", "E+R"), ("E+R", "R
 INTERACTION: dict[str, float] = {"E+L": 1.0, "R+L": -1.0, "E+R": -1.0, "R+R": 1.0}
 """``(E+L − R+L) − (E+R − R+R)``: does evolution pay off only with learning?"""
 INTERACTION_NAME = "interaction (E+L − R+L) − (E+R − R+R)"
+EXTRA_PAIRS: tuple[tuple[str, str], ...] = (("E+L+I", "E+L"),)
+"""Questions beyond the paper's, each its own test outside the Holm family of
+:data:`PAIRS` (so the paper's p-values are the same with or without them): does
+inheriting a parent's policy pay off? E+L+I's fitness includes what its robots
+inherited, so it measures policy and body together, not the body alone."""
 FIT_METHODS = ["powell", "lbfgs"]
 """MixedLM optimisers in turn: statsmodels' default (BFGS first) stops short of the REML
 optimum on small balanced designs; Powell reaches it and L-BFGS polishes."""
@@ -60,9 +66,17 @@ def question_name(a: str, b: str) -> str:
 
 
 def questions() -> list[tuple[str, dict[str, float]]]:
-    """Every question as (name, contrast weights): the pairs, then the interaction."""
+    """Every question as (name, contrast weights): the paper's pairs, the interaction,
+    then :data:`EXTRA_PAIRS`."""
     pairs = [(question_name(a, b), {a: 1.0, b: -1.0}) for a, b in PAIRS]
-    return [*pairs, (INTERACTION_NAME, dict(INTERACTION))]
+    extra = [(question_name(a, b), {a: 1.0, b: -1.0}) for a, b in EXTRA_PAIRS]
+    return [*pairs, (INTERACTION_NAME, dict(INTERACTION)), *extra]
+
+
+def in_holm_family(question: str) -> bool:
+    """Whether a question is one of the paper's pairs, the Holm family of :data:`PAIRS`
+    (the interaction and :data:`EXTRA_PAIRS` are each their own test)."""
+    return question in {question_name(a, b) for a, b in PAIRS}
 
 
 # ---------------------------------------------------------------- per-run summaries
@@ -216,7 +230,8 @@ def run_level_tests(
         runs: :func:`run_summaries`.
         summaries: The per-run summaries to test.
         alpha: Family-wise level; Holm over :data:`PAIRS` within each summary; the
-            interaction is its own question at ``alpha``.
+            interaction and each of :data:`EXTRA_PAIRS` are their own questions at
+            ``alpha``.
 
     Returns:
         One row per summary and question: ``summary``, ``question``, ``runs`` (per
@@ -243,8 +258,9 @@ def run_level_tests(
 
 
 def _with_holm(rows: list[Row], alpha: float) -> list[Row]:
-    """``p_holm`` over the pair rows (the interaction keeps its p) and ``reject``."""
-    pairs = [r for r in rows if r["question"] != INTERACTION_NAME]
+    """``p_holm`` over the rows of the paper's pairs (the interaction and the extra
+    pairs keep their p) and ``reject``."""
+    pairs = [r for r in rows if in_holm_family(r["question"])]
     for row, adjusted in zip(pairs, holm([r["p"] for r in pairs]), strict=True):
         row["p_holm"] = float(adjusted)
     for row in rows:
@@ -341,7 +357,8 @@ def mixed_model_tests(robots: pd.DataFrame, value: str = "fitness",
     Args:
         robots: Robots table, fully trained robots only.
         value: Column modelled.
-        alpha: Family-wise level (Holm over :data:`PAIRS`; interaction on its own).
+        alpha: Family-wise level (Holm over :data:`PAIRS`; the interaction and each
+            of :data:`EXTRA_PAIRS` on their own).
 
     Returns:
         One row per question that can be fitted: ``question``, ``runs``, ``robots``,

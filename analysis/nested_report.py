@@ -3,8 +3,9 @@
 :func:`nested_tables` computes them from a robots table; :func:`nested_markdown`
 writes them; :func:`analysis.report.ablation_tables` and
 :func:`analysis.report.ablation_markdown` call both. Each question of the ablation
-(:data:`analysis.nested.PAIRS` and the interaction) gets one answering test, Welch's
-t-test on the runs' mean fitness, and the mixed model beside it.
+(:data:`analysis.nested.PAIRS` and the interaction, and E+L+I vs E+L when the fifth arm
+is there: :data:`analysis.nested.EXTRA_PAIRS`) gets one answering test, Welch's t-test
+on the runs' mean fitness, and the mixed model beside it.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import pandas as pd
 
 from analysis import nested, power
 from analysis.markdown import fmt_ci, fmt_number, markdown_table
-from analysis.tables import method_order
+from analysis.tables import EXTRA_METHODS, method_order
 
 MIN_RUNS = 2
 """GA seeds every method needs before the run-level sections are computed."""
@@ -49,19 +50,23 @@ class NestedTables:
 
 def nested_tables(robots: pd.DataFrame, population_size: int, rng: np.random.Generator
                   ) -> NestedTables | None:
-    """The run-level tables, or None when a method has fewer than :data:`MIN_RUNS` runs.
+    """The run-level tables, or None when a method has fewer than :data:`MIN_RUNS` runs
+    (a method of the paper's; an extra arm with fewer leaves only its question
+    untested).
 
     Args:
         robots: Robots table, fully trained robots only.
         population_size: Initial population size (for the final population's mean).
         rng: Randomness of the power simulation.
     """
-    if robots.groupby("method")["run"].nunique().min() < MIN_RUNS:
+    per_method = robots.groupby("method")["run"].nunique()
+    paper = per_method.drop(list(EXTRA_METHODS), errors="ignore")
+    if (paper if len(paper) else per_method).min() < MIN_RUNS:
         return None
     runs = nested.run_summaries(robots, population_size)
     means = pd.concat([nested.run_level_means(runs, s).assign(summary=s)
                        for s in nested.RUN_SUMMARIES], ignore_index=True)
-    notes = []
+    notes = _extra_notes(per_method)
     mixed = nested.mixed_model_tests(robots)
     if not mixed["converged"].all():
         notes.append("The mixed model did not converge for: "
@@ -74,6 +79,22 @@ def nested_tables(robots: pd.DataFrame, population_size: int, rng: np.random.Gen
     return NestedTables(runs=runs, means=means, run_tests=nested.run_level_tests(runs),
                         mixed=mixed, components=nested.variance_components(robots),
                         power=table, notes=notes)
+
+
+def _extra_notes(runs_per_method: pd.Series) -> list[str]:
+    """What the arms beyond the paper's four answer, and how (none when absent)."""
+    notes = []
+    for method in (m for m in EXTRA_METHODS if m in runs_per_method.index):
+        asked = [nested.question_name(a, b) for a, b in nested.EXTRA_PAIRS if method in (a, b)]
+        notes.append(f"{method} answers {', '.join(asked)}: its own test, outside the Holm "
+                     "family of the paper's three pairs (its p_holm is its p; the paper's "
+                     f"p-values are the same without it). {method}'s fitness includes what "
+                     "its robots inherited: it measures policy and body together, not the "
+                     "body alone.")
+        if runs_per_method[method] < MIN_RUNS:
+            notes.append(f"{method} has {runs_per_method[method]} run(s); Welch's test "
+                         f"needs {MIN_RUNS} or more, so its question is not decided yet.")
+    return notes
 
 
 def write_nested_tables(t: NestedTables, out: Path) -> list[Path]:

@@ -35,6 +35,7 @@ METHOD_COLORS: dict[str, str] = {
     "R+L": "goldenrod",
     "E+R": "tab:green",
     "E+L": "tab:red",
+    "E+L+I": "tab:purple",  # E+L with policy inheritance, the fifth arm
 }
 
 

@@ -18,7 +18,8 @@ so planning at ``alpha / n_tests`` (Bonferroni) is the level that guarantees the
 whatever the other pairs do.
 
 ``python -m analysis.power RUN... [--first N] [--history-only]`` prints the seeds for
-the observed E+L − R+L difference of the runs given.
+the observed E+L − R+L difference of the runs given; ``--pair E+L+I E+L`` for the fifth
+arm's question, a test of its own (``n_tests`` 1: :data:`analysis.nested.EXTRA_PAIRS`).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ from statsmodels.tools.sm_exceptions import ConvergenceWarning
 from analysis.history_runs import load_histories
 from analysis.load import RunDirectoryError, load_runs
 from analysis.markdown import markdown_table
-from analysis.nested import variance_components
-from analysis.tables import fully_trained
+from analysis.nested import PAIRS, variance_components
+from analysis.tables import EXTRA_METHODS, fully_trained
 
 MAX_SEEDS = 10_000
 """Seeds per method beyond which :func:`seeds_needed` gives up (returns this)."""
@@ -206,12 +207,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (FileNotFoundError, RunDirectoryError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    table = power_table(robots, (args.pair[0], args.pair[1]),
-                        rng=np.random.default_rng(args.seed))
+    pair = (args.pair[0], args.pair[1])
+    family = not set(pair) & set(EXTRA_METHODS)  # else a question of its own
+    n_tests = len(PAIRS) if family else 1
+    table = power_table(robots, pair, n_tests=n_tests, rng=np.random.default_rng(args.seed))
     first = table.iloc[0]
+    level = ("alpha = 0.05 / 3 for Holm over three pairs" if family
+             else "alpha = 0.05, a test of its own")
     print(f"{first['pair']} = {first['delta']:.3f}: {int(first['seeds'])} GA seeds per method "
           f"at {int(first['robots_per_run'])} robots per run (80 % power, Welch on run means, "
-          f"alpha = 0.05 / 3 for Holm over three pairs)")
+          f"{level})")
     print(markdown_table(table), end="")
     return 0
 

@@ -19,7 +19,11 @@ Reads run directories (or a Hydra multirun folder, :mod:`analysis.load`; with
   method against R+R (Figs. 13–15); every run's fitness over the evolution (Figs. 10,
   12); learning curves of selected robots (Figs. 9, 11); best fitness so far against
   cumulative env steps;
-* the paper's numbers beside ours (the reward scales differ; see the report's note).
+* the paper's numbers beside ours (the reward scales differ; see the report's note);
+* a fifth arm, E+L+I (E+L with policy inheritance), when present: in the tables and
+  figures, left out of the paper's tests, with a question of its own, E+L+I vs E+L
+  (:data:`analysis.nested.EXTRA_PAIRS`: Mann–Whitney on robots here, Welch on run means
+  and the mixed model in the run-level sections), outside the paper's Holm family.
 
 Methods missing from the input are listed as missing; whatever needs them (a test, a
 contrast, a panel) is left out with a sentence saying so. Robots whose evaluation
@@ -48,13 +52,14 @@ from analysis.bootstrap import Resampling
 from analysis.history_runs import load_histories
 from analysis.load import RunDirectoryError, Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table, safe_name
+from analysis.nested import EXTRA_PAIRS, question_name
 from analysis.nested_report import (
     NestedTables,
     nested_markdown,
     nested_tables,
     write_nested_tables,
 )
-from analysis.tables import METHODS, fully_trained, method_order
+from analysis.tables import EXTRA_METHODS, METHODS, fully_trained, method_order, paper_rows
 
 REPORT = "report.md"
 LEARNING_CURVES = 8
@@ -79,6 +84,8 @@ class AblationTables:
             ``estimate [ci_low, ci_high]``.
         kruskal: The Kruskal–Wallis test over robots, or None.
         pairwise: :func:`analysis.stats.pairwise_mann_whitney` over robots.
+        extra_pairwise: The same for :data:`analysis.nested.EXTRA_PAIRS` whose methods
+            are present, each its own test (empty without them).
         per_run: The same two tests on per-run means (``kruskal``, ``pairwise``), or
             None with too few seeds.
         interaction: :func:`analysis.stats.interaction_contrast`, or None.
@@ -102,6 +109,17 @@ class AblationTables:
     budgets: pd.DataFrame
     notes: list[str] = field(default_factory=list)
     nested: NestedTables | None = None
+    extra_pairwise: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+
+EXTRA_NOTE = (
+    "{methods}: beyond the paper's four methods, in the tables and figures but left out "
+    "of the paper's tests (Kruskal–Wallis, the pairwise tests and their Holm family, the "
+    "interaction, the order beside the paper); each answers its own question "
+    "({questions}). E+L+I is E+L whose offspring start from a parent's trained policy "
+    "(ga.inheritance): its fitness includes what its robots inherited, so it measures "
+    "policy and body together, not the body alone."
+)
 
 
 def _input_notes(robots: pd.DataFrame, scored: pd.DataFrame,
@@ -145,12 +163,19 @@ def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5,
     present = method_order(scored["method"])
     missing = [m for m in METHODS if m not in present]
     notes, left_out = _input_notes(robots, scored, missing)
-    summary = stats.summarize(scored, resampling, k=k)
-    kruskal, pairwise = _tests(scored, None, notes)
+    paper = paper_rows(scored)  # the paper's methods: their numbers as without the others
+    extra_pairs = [(a, b) for a, b in EXTRA_PAIRS if {a, b} <= set(present)]
+    if len(paper) < len(scored):
+        notes.append(EXTRA_NOTE.format(
+            methods=", ".join(m for m in present if m in EXTRA_METHODS),
+            questions=", ".join(question_name(a, b) for a, b in extra_pairs)
+            or "none here: a method it is compared with is missing"))
+    summary = stats.summarize(paper, resampling, k=k)
+    kruskal, pairwise = _tests(paper, None, notes)
     per_run = None
-    runs_per_method = scored.groupby("method")["run"].nunique()
-    if len(present) >= 2 and runs_per_method.min() >= SEEDS_FOR_RUN_TESTS:
-        per_run = _tests(scored, "mean", notes)
+    runs_per_method = paper.groupby("method")["run"].nunique()
+    if paper["method"].nunique() >= 2 and runs_per_method.min() >= SEEDS_FOR_RUN_TESTS:
+        per_run = _tests(paper, "mean", notes)
     else:
         notes.append(f"Tests on per-run means need {SEEDS_FOR_RUN_TESTS} or more GA seeds "
                      "per method; the tests below compare robots.")
@@ -163,12 +188,17 @@ def ablation_tables(robots: pd.DataFrame, resampling: Resampling, *, k: int = 5,
     if nested is None:
         notes.append("Run-level statistics need two or more GA seeds per method; not "
                      "computed.")
+    extra = scored[scored["method"].isin(EXTRA_METHODS)]
+    if len(extra):  # last, so that the paper's intervals draw what they draw without it
+        summary = pd.concat([summary, stats.summarize(extra, resampling, k=k)],
+                            ignore_index=True)
     return AblationTables(
         present=present, missing=missing, left_out=left_out, summary=summary,
         main=main_table(summary, missing), kruskal=kruskal, pairwise=pairwise,
         per_run=per_run, interaction=interaction,
         paper=stats.compare_with_paper(summary), budgets=budget_table(scored), notes=notes,
-        nested=nested,
+        nested=nested, extra_pairwise=stats.pairwise_mann_whitney(scored, pairs=extra_pairs)
+        if extra_pairs else pd.DataFrame(),
     )
 
 
@@ -310,7 +340,8 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
         The Markdown text.
     """
     t = tables
-    parts = ["# Ablation: R+R, R+L, E+R, E+L\n\n",
+    extra = [m for m in t.present if m in EXTRA_METHODS]
+    parts = [f"# Ablation: {', '.join(['R+R', 'R+L', 'E+R', 'E+L', *extra])}\n\n",
              f"Methods present: {', '.join(t.present) or 'none'}. "
              f"Missing: {', '.join(t.missing) or 'none'}.\n\n"]
     parts += [f"- {note}\n" for note in [*runs.notes, *t.notes]]
@@ -323,6 +354,10 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
     parts += ["\n## Tests\n", tests_markdown("robots", t.kruskal, t.pairwise)]
     if t.per_run is not None:
         parts.append(tests_markdown("per-run means", *t.per_run))
+    if not t.extra_pairwise.empty:
+        parts += ["\n### Beyond the paper's methods, on robots\n\n",
+                  "Each pair its own question, outside the Holm family above: two-sided "
+                  "Mann–Whitney U; A12 = P(a beats b).\n\n", markdown_table(t.extra_pairwise)]
     parts.append("\n## Interaction: does evolution pay off only with learning?\n\n")
     if t.interaction is None:
         parts.append(f"Not computed: needs all four methods (missing: {', '.join(t.missing)}).\n")
@@ -333,7 +368,8 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
         parts.append(markdown_table(shown[["contrast", "estimate [CI]"]]))
     if t.nested is not None:
         parts.append(nested_markdown(t.nested))
-    parts += ["\n## Beside the paper\n\n", PAPER_NOTE + "\n\n", _order_markdown(t.summary),
+    parts += ["\n## Beside the paper\n\n", PAPER_NOTE + "\n\n",
+              _order_markdown(paper_rows(t.summary)),
               "\n", markdown_table(t.paper)]
     parts.append("\n## Figures\n")
     for stem, path in figures.items():

@@ -31,7 +31,7 @@ the best robot a method could find.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -239,6 +239,7 @@ def pairwise_mann_whitney(
     *,
     alpha: float = 0.05,
     per_run: str | None = None,
+    pairs: Sequence[tuple[str, str]] | None = None,
 ) -> pd.DataFrame:
     """Two-sided Mann–Whitney U test and A12 for every pair of methods, Holm-adjusted.
 
@@ -247,6 +248,11 @@ def pairwise_mann_whitney(
         value: Column to compare.
         alpha: Family-wise error level for ``reject``.
         per_run: See :func:`method_samples`.
+        pairs: The pairs ``(a, b)`` to test, one Holm family; None for every pair of
+            the methods present, in :data:`analysis.tables.METHODS` order.
+
+    Raises:
+        ValueError: If a method of ``pairs`` has no robots.
 
     Returns:
         One row per pair ``(a, b)`` with ``n_a``, ``n_b``, ``u`` (U of ``a``), ``p``,
@@ -254,8 +260,11 @@ def pairwise_mann_whitney(
         ``magnitude``.
     """
     samples = method_samples(robots, value, per_run)
+    absent = sorted({m for pair in pairs or () for m in pair} - set(samples))
+    if absent:
+        raise ValueError(f"robots table has no rows for method(s) {absent}")
     rows = []
-    for a, b in itertools.combinations(samples, 2):
+    for a, b in itertools.combinations(samples, 2) if pairs is None else pairs:
         x, y = samples[a], samples[b]
         result = scipy.stats.mannwhitneyu(x, y, alternative="two-sided")
         a12 = vargha_delaney_a12(x, y)

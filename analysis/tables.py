@@ -10,7 +10,9 @@ column        dtype    meaning
 ============  =======  ==============================================================
 ``run``       str      run directory id (one GA run of one method with one seed)
 ``method``    str      ``"R+R"``, ``"R+L"``, ``"E+R"`` or ``"E+L"``: structure strategy
-                       (Random / Evolved) + behaviour strategy (Random / Learned)
+                       (Random / Evolved) + behaviour strategy (Random / Learned);
+                       ``+I`` after it when offspring inherit a parent's policy
+                       (``"E+L+I"``, :data:`EXTRA_METHODS`)
 ``seed``      int      GA seed; the unit of replication for the ``E`` methods
 ``birth``     int      0-based birth order within the run
 ``name``      str      ``robot-xxxxxxxx``
@@ -51,6 +53,10 @@ import pandas as pd
 
 METHODS: tuple[str, ...] = ("R+R", "R+L", "E+R", "E+L")
 """The four ablation methods (paper §8), in the order tables and plots list them."""
+EXTRA_METHODS: tuple[str, ...] = ("E+L+I",)
+"""Arms beyond the paper's four, listed after them: ``E+L+I`` is E+L whose offspring
+start from a parent's trained policy (``ga.inheritance``). The paper's tests leave them
+out; each answers a question of its own (:data:`analysis.nested.EXTRA_PAIRS`)."""
 
 ROBOT_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "birth", "name", "budget", "fitness", "accepted", "parents",
@@ -85,9 +91,17 @@ def is_evolved(method: str) -> bool:
 
 
 def method_order(methods: Iterable[str]) -> list[str]:
-    """The distinct ``methods`` in :data:`METHODS` order, unknown ones after, sorted."""
+    """The distinct ``methods`` in :data:`METHODS` then :data:`EXTRA_METHODS` order,
+    unknown ones after, sorted."""
     present = set(methods)
-    return [m for m in METHODS if m in present] + sorted(present - set(METHODS))
+    known = METHODS + EXTRA_METHODS
+    return [m for m in known if m in present] + sorted(present - set(known))
+
+
+def paper_rows(table: pd.DataFrame) -> pd.DataFrame:
+    """The rows of ``table`` (with a ``method`` column) the paper's tests compare: all but
+    those of :data:`EXTRA_METHODS`."""
+    return table[~table["method"].isin(EXTRA_METHODS)]
 
 
 def fully_trained(robots: pd.DataFrame) -> pd.DataFrame:

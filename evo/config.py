@@ -164,10 +164,25 @@ def structure_letter(structure: Any) -> str:
     return str(structure)
 
 
-def method_label(structure: str, learns: bool) -> str:
+def inherits(inheritance: object) -> bool:
+    """Whether a ``ga.inheritance`` value turns policy inheritance on: anything but
+    ``"off"``, or what YAML and an older config make of it (a bare ``off`` reads as
+    false; a config from before the key, None)."""
+    return inheritance not in ("off", False, None)
+
+
+def method_label(structure: str, learns: bool, inheritance: object = "off") -> str:
     """The ablation's method name (paper section 8): ``E+L``, ``E+R``, ``R+L`` or ``R+R``,
-    from the structure's letter (:func:`structure_letter`) and whether the policy learns."""
-    return f"{structure}+{'L' if learns else 'R'}"
+    from the structure's letter (:func:`structure_letter`) and whether the policy learns;
+    ``+I`` after it (``E+L+I``) when offspring inherit a parent's policy.
+
+    Args:
+        structure: The structure's letter, ``E`` or ``R``.
+        learns: Whether the policy learns (``learner.update``).
+        inheritance: ``ga.inheritance`` (:func:`inherits`); the default, off, gives the
+            four labels of the paper, so runs made before inheritance keep theirs.
+    """
+    return f"{structure}+{'L' if learns else 'R'}{'+I' if inherits(inheritance) else ''}"
 
 
 OLD_LEARNERS: dict[str, str] = {"ppo": "evo.learners.ppo.PPO", "random": "evo.learners.ppo.PPO"}

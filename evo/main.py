@@ -128,11 +128,13 @@ def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
         raise ConfigError(f"checkpoint: {err}") from None
 
 
-# ``${evo_method:${ga.structure},${learner.update}}`` in configs, e.g. a sweep's subdir;
-# ga.structure a letter (ga.structure=E,R) or its node (ga/structure=evolve,random).
+# ``${evo_method:${ga.structure},${learner.update},${ga.inheritance}}`` in configs, e.g. a
+# sweep's subdir; ga.structure a letter (ga.structure=E,R) or its node
+# (ga/structure=evolve,random); the third argument may be left out (inheritance off).
 if not OmegaConf.has_resolver("evo_method"):
     OmegaConf.register_new_resolver(
-        "evo_method", lambda structure, learns: method_label(structure_letter(structure), learns))
+        "evo_method", lambda structure, learns, inheritance="off": method_label(
+            structure_letter(structure), learns, inheritance))
 
 
 @dataclass(frozen=True)
@@ -156,7 +158,7 @@ def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
     learner = parts.learner
     ga = typed(GAConfig, cfg.ga, "ga")
     strategy = ga.strategy(generator_of(cfg), limits_of(cfg))
-    method = method_label(strategy.code, learner.update)
+    method = method_label(strategy.code, learner.update, ga.inheritance)
     job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
               config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
               timeout_s=ga.eval_timeout_s, early=ga.early_rejection)

@@ -18,6 +18,7 @@ from statsmodels.stats.power import TTestIndPower
 from analysis import nested, power, stats
 from analysis.bootstrap import Resampling
 from analysis.history_runs import load_histories
+from analysis.load import Runs
 from analysis.nested_report import write_nested_tables
 from analysis.report import ablation_markdown, ablation_tables, main
 from analysis.synthetic import synthetic_robots
@@ -231,3 +232,59 @@ def test_one_seed_per_method_leaves_the_run_level_sections_out() -> None:
     tables = ablation_tables(robots, Resampling.seeded(0, 100))
     assert tables.nested is None
     assert any("two or more GA seeds" in note for note in tables.notes)
+
+
+# ---------------------------------------------------------------- the fifth arm, E+L+I
+
+
+def test_the_fifth_arm_gets_its_own_question_and_leaves_the_papers_family_alone(
+        tmp_path: Path) -> None:
+    means = {"R+R": -0.9, "R+L": -0.5, "E+R": -0.8, "E+L": 0.5}
+    four = synthetic_robots(np.random.default_rng(11), means=means, seeds=(0, 1, 2),
+                            n_robots=8, sd=0.3, seed_sd=0.1, population_size=4)
+    fifth = synthetic_robots(np.random.default_rng(12), means={"E+L+I": 1.5}, seeds=(0, 1, 2),
+                             n_robots=8, sd=0.3, seed_sd=0.1, population_size=4)
+    without, with_it = (ablation_tables(robots, Resampling.seeded(0, 100), population_size=4)
+                        for robots in (four, pd.concat([four, fifth], ignore_index=True)))
+    assert without.nested is not None and with_it.nested is not None
+    question = "E+L+I vs E+L"
+    for test in ("run_tests", "mixed"):
+        before, after = getattr(without.nested, test), getattr(with_it.nested, test)
+        assert question not in set(before["question"])
+        pd.testing.assert_frame_equal(after[after["question"] != question].reset_index(drop=True),
+                                      before, obj=f"{test}: the paper's questions")
+        extra = after[after["question"] == question]
+        assert len(extra) == (3 if test == "run_tests" else 1), "one per run summary"
+        assert (extra["p_holm"] == extra["p"]).all(), "its own test, outside the Holm family"
+        assert extra["reject"].all() and (extra["estimate"] > 0.5).all(), "1.0 planted"
+    # The robot-level tests, the interaction and the paper's intervals are as without it.
+    pd.testing.assert_frame_equal(with_it.pairwise, without.pairwise)
+    pd.testing.assert_frame_equal(with_it.interaction, without.interaction)
+    pd.testing.assert_frame_equal(
+        with_it.summary[with_it.summary["method"] != "E+L+I"], without.summary)
+    assert list(with_it.main["method"]) == ["R+R", "R+L", "E+R", "E+L", "E+L+I"]
+    assert with_it.extra_pairwise[["a", "b"]].values.tolist() == [["E+L+I", "E+L"]]
+    assert without.extra_pairwise.empty
+    text = ablation_markdown(load_histories_of(four, tmp_path / "four"), without, {}, tmp_path)
+    assert "E+L+I" not in text
+    text = ablation_markdown(load_histories_of(pd.concat([four, fifth]), tmp_path / "five"),
+                             with_it, {}, tmp_path)
+    assert text.startswith("# Ablation: R+R, R+L, E+R, E+L, E+L+I\n")
+    assert f"| {question} | Welch t on run means | 3/3 |" in text and "E+L+I > E+L" in text
+    assert "includes what its robots inherited" in text
+
+
+def load_histories_of(robots: pd.DataFrame, folder: Path) -> Runs:
+    """``robots`` written as committed copies and read back (the report's ``runs``)."""
+    write_copies(robots, folder)
+    return load_histories(folder)
+
+
+def test_power_plans_the_fifth_arms_question_as_a_test_of_its_own(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    robots = synthetic_robots(np.random.default_rng(13), means={"E+L+I": 0.5, "E+L": 0.0},
+                              seeds=(0, 1, 2), n_robots=6, sd=0.3, seed_sd=0.2)
+    write_copies(robots, tmp_path / "runs")
+    assert power.main([str(tmp_path / "runs"), "--history-only", "--pair", "E+L+I", "E+L"]) == 0
+    headline = capsys.readouterr().out.splitlines()[0]
+    assert headline.startswith("E+L+I − E+L = ") and "alpha = 0.05, a test of its own" in headline

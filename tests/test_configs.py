@@ -32,7 +32,7 @@ from evo.components.ga import (
     ReplaceWorst,
     Roulette,
 )
-from evo.config import ConfigError, current, typed
+from evo.config import ConfigError, current, method_label, typed
 from evo.edge import physics_of, warn_if_failures_cannot_end
 from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
@@ -54,6 +54,8 @@ GROUPS = sorted(p.relative_to(CONF).as_posix() for p in CONF.rglob("*")
                 if p.is_dir() and p.relative_to(CONF).parts[0] not in ("exp", "hydra"))
 """Config groups, nested ones (``ga/structure``) included."""
 METHODS = {"E+L", "E+R", "R+L", "R+R"}
+FIFTH_ARM = ["ga.inheritance=parent", "ga.schedule.inherited=1.0"]
+"""The ablation's fifth arm, E+L+I (docs/results/ablation/run.sh)."""
 EXECUTORS = {"local": LocalExecutor, "serial": SerialExecutor, "ray": RayExecutor}
 
 
@@ -83,7 +85,7 @@ def build(cfg: DictConfig, out: Path) -> EvolveParts:
     assert isinstance(parts.job.learner, LearnerConfig)
     assert isinstance(parts.job.env, EnvConfig)
     assert parts.job.run_dir == str(out)
-    assert parts.job.method in METHODS
+    assert parts.job.method in METHODS | {"E+L+I"}
     assert isinstance(parts.executor, tuple(EXECUTORS.values()))
     assert parts.executor.workers >= 1
     return parts
@@ -268,6 +270,60 @@ def test_ablation_is_a_multirun_of_the_four_methods(
     assert len(sweep(more)) == 12
 
 
+def test_inheritance_adds_i_to_the_method_label_and_only_then() -> None:
+    for structure, learns, label in (("E", True, "E+L"), ("R", False, "R+R")):
+        assert method_label(structure, learns) == label, "the paper's four, as before"
+        for off in ("off", False, None):  # as written, as YAML reads a bare off, absent
+            assert method_label(structure, learns, off) == label, off
+        assert method_label(structure, learns, "parent") == f"{label}+I"
+
+
+def test_the_fifth_arm_is_e_l_i_in_its_own_subdir_with_room_for_failed_episodes(
+    hydra_conf: None, tmp_path: Path
+) -> None:
+    arm = ["+exp=ablation", "ga.structure=E", "learner=ppo", "seed=3"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parts = build(compose("config", overrides=[*arm, *FIFTH_ARM]), tmp_path)
+    assert parts.job.method == "E+L+I" and parts.ga.inheritance == "parent"
+    cfg = compose("config", overrides=[*arm, *FIFTH_ARM], return_hydra_config=True)
+    assert cfg.hydra.sweep.subdir == "E+L+I_seed3"
+    plain = compose("config", overrides=arm, return_hydra_config=True)
+    assert plain.hydra.sweep.subdir == "E+L_seed3", "the four arms keep their folders"
+    # Half the budget leaves an arena about 800 control steps, under t_max: failing
+    # episodes could not end, which is why the arm keeps the whole budget.
+    with pytest.warns(UserWarning, match=r"ga.schedule: 25,000 env steps .* under the episode"):
+        build(compose("config", overrides=[*arm, "ga.inheritance=parent",
+                                           "ga.schedule.inherited=0.5"]), tmp_path)
+
+
+def test_run_sh_starts_only_the_arms_asked_for_and_resumes_them(tmp_path: Path) -> None:
+    script = tmp_path / "docs" / "results" / "ablation" / "run.sh"
+    script.parent.mkdir(parents=True)
+    script.write_bytes((REPO / "docs" / "results" / "ablation" / "run.sh").read_bytes())
+    script.chmod(0o755)
+    python = tmp_path / "python"  # stands in for the virtualenv's: prints its arguments
+    python.write_text('#!/usr/bin/env bash\necho "$*"\n')
+    python.chmod(0o755)
+    started = tmp_path / "runs" / "ablation" / "E+L+I_seed1"
+    started.mkdir(parents=True)
+    (started / "state.json").write_text("{}")
+    env = {**os.environ, "PYTHON": str(python), "ARMS": "E+L+I", "SEEDS": "0 1"}
+    done = subprocess.run([str(script)], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    logs = sorted(p.name for p in (tmp_path / "runs").glob("*.log"))
+    assert logs == ["ablation_E+L+I_seed0.log", "ablation_E+L+I_seed1.log"]
+    new = (tmp_path / "runs" / "ablation_E+L+I_seed0.log").read_text().split()
+    assert new[1:] == ["+exp=ablation", "hydra.mode=RUN", "ga.structure=E", "learner=ppo",
+                       "seed=0", "executor=serial", "hydra.run.dir=runs/ablation/E+L+I_seed0",
+                       *FIFTH_ARM]
+    resumed = (tmp_path / "runs" / "ablation_E+L+I_seed1.log").read_text().split()
+    assert resumed[1:] == ["resume=runs/ablation/E+L+I_seed1"]
+    done = subprocess.run([str(script)], env={**env, "ARMS": "E+L+X"}, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "ARMS: unknown arm 'E+L+X'" in done.stderr
+
+
 # ---- older configs and shorthands ----------------------------------------------------------
 
 OLD_CONFIG = REPO / "tests" / "data" / "run_58aad82" / "stopped" / "config.yaml"
@@ -335,6 +391,8 @@ def test_a_runs_method_comes_from_either_form_of_its_config(
     for config in (today, old):  # a run directory without history or summary
         assert isinstance(config, dict)
         assert run_method(tmp_path, pd.DataFrame(), RunConfig.of(config)) == "R+R", config
+    inherits = {"ga": {"structure": "E", "inheritance": "parent"}, "learner": {"update": True}}
+    assert run_method(tmp_path, pd.DataFrame(), RunConfig.of(inherits)) == "E+L+I"
 
 
 # ---- bad values stop the run at start ---------------------------------------------------------

@@ -1,33 +1,59 @@
 #!/usr/bin/env bash
-# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0-4): every
-# unfinished run at once, one process each (executor=serial), sharing the machine's
-# cores, so that all seeds grow together and a report over each run's first N robots
-# (--first N) can be made before the end. Resumable: rerun it to continue every
-# unfinished run. SEEDS="1 2" limits it to some seeds; EXP=<name> runs another regime of
-# the same sweep into runs/<name>/ (docs/results/ablation_100k/run.sh does).
+# The ablation (+exp=ablation, 4 methods x 100 robots x GA seeds 0-4, and the fifth arm
+# E+L+I): every unfinished run at once, one process each (executor=serial), sharing the
+# machine's cores, so that all seeds grow together and a report over each run's first N
+# robots (--first N) can be made before the end. Resumable: rerun it to continue every
+# unfinished run. SEEDS="1 2" limits it to some seeds; ARMS="E+L+I" to some arms (method
+# names, default all five; an arm already running elsewhere must not be started twice:
+# its run lock would refuse it); EXP=<name> runs another regime of the same sweep into
+# runs/<name>/ (docs/results/ablation_100k/run.sh does, with the paper's four arms).
 #   docs/results/ablation/run.sh                  # from the repository root
+#   ARMS="E+L+I" docs/results/ablation/run.sh     # only the fifth arm
 #   python -m analysis.report runs/ablation --out docs/results/ablation [--first 60]
 set -u
 cd "$(dirname "$0")/../../.."
 py=${PYTHON:-.venv/bin/python}
 exp=${EXP:-ablation}
+arms=" ${ARMS:-E+L E+R R+L R+R E+L+I} "
 one() {
   local structure=$1 learner=$2 name=$3 seed=$4
+  shift 4  # the rest: the arm's own overrides
   local dir=runs/$exp/${name}_seed$seed
   if grep -qs '"complete": true' "$dir/summary.json"; then return; fi
   if [ -f "$dir/state.json" ]; then
     args=("resume=$dir")
   else
     args=(+exp="$exp" hydra.mode=RUN ga.structure="$structure" learner="$learner"
-          seed="$seed" executor=serial "hydra.run.dir=$dir")
+          seed="$seed" executor=serial "hydra.run.dir=$dir" "$@")
   fi
   MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/${exp}_${name}_seed$seed.log" 2>&1
 }
+# Each arm: structure, learner, method name, then its overrides. E+L+I is E+L whose
+# offspring start from a parent's trained policy (ga.inheritance=parent). It keeps the
+# whole budget (ga.schedule.inherited=1.0): in this regime a robot gets 32 arenas x 64
+# steps x 25 batches = 51,200 env steps, 1,600 control steps per arena; half of it
+# leaves each arena about 800 control steps, fewer than an episode's T_max of 1,000, so
+# an episode that fails would never end, and the fitness (paper Eq. 8, the mean return
+# of the completed episodes) would average the successes only (evo warns at start).
+specs=("E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"
+       "E ppo E+L+I ga.inheritance=parent ga.schedule.inherited=1.0")
+for arm in $arms; do
+  known=no
+  for spec in "${specs[@]}"; do
+    read -r -a words <<< "$spec"
+    if [ "${words[2]}" = "$arm" ]; then known=yes; fi
+  done
+  if [ $known = no ]; then
+    echo "ARMS: unknown arm '$arm'; expected some of: E+L E+R R+L R+R E+L+I" >&2
+    exit 2
+  fi
+done
 mkdir -p runs
 for seed in ${SEEDS:-0 1 2 3 4}; do
-  for spec in "E ppo E+L" "E random E+R" "R ppo R+L" "R random R+R"; do
-    # shellcheck disable=SC2086
-    one $spec "$seed" &
+  for spec in "${specs[@]}"; do
+    read -r -a words <<< "$spec"
+    case "$arms" in *" ${words[2]} "*) ;; *) continue ;; esac
+    one "${words[@]:0:3}" "$seed" "${words[@]:3}" &
   done
 done
 wait
