@@ -29,7 +29,7 @@ import logging
 import os
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import hydra
@@ -224,6 +224,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
     parts = evolve_parts(cfg, out)
     store = code.store(out)
     saved = _state_to_continue(store, resuming)
+    parts = keeping_its_method(parts, saved)
     if resuming:
         lock.claim()
     budgets = parts.ga.expected_budgets()
@@ -256,6 +257,15 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
             log.close(history, parts.job.physics,
                       summary=evolution.summary() if evolution is not None else None)
     print_summary(summary, out)
+
+
+def keeping_its_method(parts: EvolveParts, saved: SavedState | None) -> EvolveParts:
+    """``parts`` with the method label the run's history already holds, so that every row
+    of a run has one: a run with ``ga.inheritance`` on started before inheritance was
+    part of the label (``E+L``, now ``E+L+I``) resumes as ``E+L``."""
+    if saved is None or not saved.history or saved.history[0].method == parts.job.method:
+        return parts
+    return replace(parts, job=replace(parts.job, method=saved.history[0].method))
 
 
 def _state_to_continue(store: RunStore, resuming: bool) -> SavedState | None:

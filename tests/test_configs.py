@@ -15,8 +15,10 @@ import subprocess
 import sys
 import warnings
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from hydra import compose, initialize_config_dir
@@ -44,8 +46,11 @@ from evo.main import (
     _resume_in_place,
     _write_config,
     evolve_parts,
+    keeping_its_method,
 )
 from evo.robot.operators import RotateEdge
+from evo.run.records import HistoryRow
+from evo.run.store import SavedState, rng_state
 
 REPO = Path(__file__).resolve().parents[1]
 CONF = REPO / "conf"
@@ -295,6 +300,20 @@ def test_the_fifth_arm_is_e_l_i_in_its_own_subdir_with_room_for_failed_episodes(
     with pytest.warns(UserWarning, match=r"ga.schedule: 25,000 env steps .* under the episode"):
         build(compose("config", overrides=[*arm, "ga.inheritance=parent",
                                            "ga.schedule.inherited=0.5"]), tmp_path)
+
+
+def test_a_run_resumes_with_the_method_its_history_holds(hydra_conf: None, tmp_path: Path
+                                                        ) -> None:
+    """A run with inheritance on from before ``+I`` was in the label keeps ``E+L``."""
+    parts = build(compose("config", overrides=FIFTH_ARM), tmp_path)
+    row = HistoryRow(0, "robot-00000000", "E+L", (), "random", 1, 1, -1.0, True, "", 1, 1,
+                     0.0, "", -1.0, -1.0, "trained", float("nan"))
+    saved = SavedState(seed=0, next_birth=1, rng=rng_state(np.random.default_rng(0)),
+                       population=[], history=[row], pending=[], wall_seconds=1.0)
+    assert keeping_its_method(parts, saved).job.method == "E+L"
+    assert keeping_its_method(parts, None).job.method == "E+L+I", "a new run: today's label"
+    same = replace(saved, history=[replace(row, method="E+L+I")])
+    assert keeping_its_method(parts, same) is parts
 
 
 def test_run_sh_starts_only_the_arms_asked_for_and_resumes_them(tmp_path: Path) -> None:
