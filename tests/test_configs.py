@@ -341,6 +341,18 @@ def test_run_sh_starts_only_the_arms_asked_for_and_resumes_them(tmp_path: Path) 
     done = subprocess.run([str(script)], env={**env, "ARMS": "E+L+X"}, capture_output=True,
                           text=True, timeout=60)
     assert done.returncode == 2 and "ARMS: unknown arm 'E+L+X'" in done.stderr
+    # The evolved side of the designer comparison: another arena, fewer robots per run.
+    env = {**env, "ARMS": "E+L", "SEEDS": "2", "ARENA": "cluttered", "ROBOTS": "60"}
+    done = subprocess.run([str(script)], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    cluttered = (tmp_path / "runs" / "ablation_cluttered_E+L_seed2.log").read_text().split()
+    assert cluttered[1:] == ["+exp=ablation", "hydra.mode=RUN", "ga.structure=E",
+                             "learner=ppo", "seed=2", "executor=serial",
+                             "hydra.run.dir=runs/ablation_cluttered/E+L_seed2",
+                             "env=cluttered", "ga.robot_budget=60"]
+    done = subprocess.run([str(script)], env={**env, "ARENA": "rocky"}, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "ARENA: expected clean or cluttered, got 'rocky'" in done.stderr
 
 
 # ---- older configs and shorthands ----------------------------------------------------------

@@ -7,6 +7,10 @@
 # names, default all five; an arm already running elsewhere must not be started twice:
 # its run lock would refuse it); EXP=<name> runs another regime of the same sweep into
 # runs/<name>/ (docs/results/ablation_100k/run.sh does, with the paper's four arms).
+# ARENA=cluttered evolves in the cluttered arena instead, into runs/<name>_cluttered/;
+# ROBOTS=N evaluates N robots per run instead of 100 (both only when a run starts: a
+# resumed run keeps its config). The evolved side of the designer comparison:
+#   ARENA=cluttered ROBOTS=60 ARMS="E+L E+L+I" SEEDS="0 1 2" docs/results/ablation/run.sh
 #   docs/results/ablation/run.sh                  # from the repository root
 #   ARMS="E+L+I" docs/results/ablation/run.sh     # only the fifth arm
 #   python -m analysis.report runs/ablation --out docs/results/ablation [--first 60]
@@ -14,19 +18,26 @@ set -u
 cd "$(dirname "$0")/../../.."
 py=${PYTHON:-.venv/bin/python}
 exp=${EXP:-ablation}
+arena=${ARENA:-clean}
+case "$arena" in
+  clean) root=runs/$exp; extra=() ;;
+  cluttered) root=runs/${exp}_cluttered; extra=(env=cluttered) ;;
+  *) echo "ARENA: expected clean or cluttered, got '$arena'" >&2; exit 2 ;;
+esac
+if [ -n "${ROBOTS:-}" ]; then extra+=(ga.robot_budget="$ROBOTS"); fi
 arms=" ${ARMS:-E+L E+R R+L R+R E+L+I} "
 one() {
   local structure=$1 learner=$2 name=$3 seed=$4
   shift 4  # the rest: the arm's own overrides
-  local dir=runs/$exp/${name}_seed$seed
+  local dir=$root/${name}_seed$seed
   if grep -qs '"complete": true' "$dir/summary.json"; then return; fi
   if [ -f "$dir/state.json" ]; then
     args=("resume=$dir")
   else
     args=(+exp="$exp" hydra.mode=RUN ga.structure="$structure" learner="$learner"
-          seed="$seed" executor=serial "hydra.run.dir=$dir" "$@")
+          seed="$seed" executor=serial "hydra.run.dir=$dir" "${extra[@]}" "$@")
   fi
-  MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/${exp}_${name}_seed$seed.log" 2>&1
+  MUJOCO_GL=egl "$py" evo/main.py "${args[@]}" >> "runs/${root#runs/}_${name}_seed$seed.log" 2>&1
 }
 # Each arm: structure, learner, method name, then its overrides. E+L+I is E+L whose
 # offspring start from a parent's trained policy (ga.inheritance=parent). It keeps the
