@@ -42,6 +42,7 @@ time in separate processes (each with ``+exp=train``'s threads: ``env.nthread=2`
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import multiprocessing
@@ -273,24 +274,24 @@ def run_trainings(todo: Sequence[Training], parts: TrainingParts, limits: Limits
         What failed, one line each.
     """
     failed: list[str] = []
+
+    def attempt(training: Training, result: Callable[[], str]) -> None:
+        try:
+            log(f"done: {result()}")
+        except Exception as err:  # noqa: BLE001 - the others still train
+            failed.append(f"{training.label} seed {training.seed}: {err!r}")
+            log(f"failed: {failed[-1]}")
+
     if jobs <= 1:
         for training in todo:
-            try:
-                log(f"done: {train_one(training, parts, limits, threads, quiet=False)}")
-            except Exception as err:  # noqa: BLE001 - the others still train
-                failed.append(f"{training.label} seed {training.seed}: {err!r}")
-                log(f"failed: {failed[-1]}")
+            attempt(training, functools.partial(train_one, training, parts, limits, threads,
+                                                quiet=False))
         return failed
     context = multiprocessing.get_context("spawn")  # no forked torch or MuJoCo state
     with ProcessPoolExecutor(jobs, mp_context=context) as pool:
         futures = {pool.submit(train_one, t, parts, limits, threads, True): t for t in todo}
         for future in as_completed(futures):
-            training = futures[future]
-            try:
-                log(f"done: {future.result()}")
-            except Exception as err:  # noqa: BLE001 - the others still train
-                failed.append(f"{training.label} seed {training.seed}: {err!r}")
-                log(f"failed: {failed[-1]}")
+            attempt(futures[future], future.result)
     return failed
 
 
