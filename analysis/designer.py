@@ -2,7 +2,8 @@
 retrained from scratch under the same protocol, compared head to head.
 
     python -m analysis.designer --runs RUN [RUN ...] --out DIR [--robots robots/]
-        [--seeds 3] [--budget 150000] [--arena clean|cluttered] [--jobs 1] [overrides...]
+        [--seeds 3] [--confirm 3] [--budget 150000] [--arena clean|cluttered] [--jobs 1]
+        [overrides...]
 
     python -m analysis.designer --runs runs/ablation --out runs/designer --arena clean
 
@@ -26,12 +27,20 @@ Into ``--out``:
   (``summary.json``, ``policy.pt``, ``curve.csv``, ``robot.json``);
 * ``robots/<robot>.json``: the robots compared; ``settings.json``: the overrides and
   the resolved config;
-* ``trainings.csv``: one row per finished training;
+* ``trainings.csv``: one row per finished training (``confirmation`` true for the
+  trainings of ``--confirm``);
 * ``comparison.csv``: per robot, the mean over seeds with a 95 % t-interval, and the
   worst seed, of each metric;
 * ``head_to_head.csv`` and ``comparison.md``: the best evolved robot against the best
   hand-made one (best: the highest mean evaluation return over seeds), the differences
   with Welch 95 % intervals over seeds, and a one-line verdict.
+
+**Selection bias and ``--confirm C``.** Each side's best is the robot that did best in
+these same trainings, so its mean is biased upwards, the more so the more robots a side
+has. With ``--confirm C`` the two chosen robots are trained again under fresh seeds
+``seeds .. seeds+C-1`` and the verdict comes from those trainings alone (the choice made
+on seeds ``0 .. seeds-1`` cannot favour either side there); ``trainings.csv`` holds
+them too, marked ``confirmation``.
 
 Resumable: a training whose ``summary.json`` exists is not run again, so the same
 command continues a stopped comparison (more ``--seeds``, or more runs, add trainings).
@@ -81,7 +90,7 @@ TRAINING_COLUMNS = ("robot", "origin", "run", "structure", "seed", "arena", "env
 """``trainings.csv``: ``robot`` the label compared (run name or file name), ``run`` the
 GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
 ``eval_time_to_target`` simulated seconds (empty when no episode reached the target),
-``wall_seconds`` the training's wall time."""
+``wall_seconds`` the training's wall time; the file adds ``confirmation``."""
 CONFIDENCE = 0.95
 TRAININGS, COMPARISON, HEAD_TO_HEAD, REPORT, SETTINGS = (
     "trainings.csv", "comparison.csv", "head_to_head.csv", "comparison.md", "settings.json")
@@ -225,7 +234,7 @@ class Training:
     out: Path
 
 
-def plan(out: Path, entrants: Sequence[Entrant], seeds: int) -> list[Training]:
+def plan(out: Path, entrants: Sequence[Entrant], seeds: range) -> list[Training]:
     """Every (robot, seed) training whose ``summary.json`` is not there yet; the robots
     are saved in ``<out>/robots/`` first."""
     from evo.robot.io import save_robot
@@ -236,7 +245,7 @@ def plan(out: Path, entrants: Sequence[Entrant], seeds: int) -> list[Training]:
         robot_file.parent.mkdir(parents=True, exist_ok=True)
         save_robot(entrant.robot, robot_file)
         todo += [Training(entrant.label, robot_file, s, training_dir(out, entrant.label, s))
-                 for s in range(seeds)
+                 for s in seeds
                  if not TrainLayout(training_dir(out, entrant.label, s)).summary.is_file()]
     return todo
 
@@ -295,11 +304,11 @@ def run_trainings(todo: Sequence[Training], parts: TrainingParts, limits: Limits
     return failed
 
 
-def collect(out: Path, entrants: Sequence[Entrant], seeds: int) -> pd.DataFrame:
+def collect(out: Path, entrants: Sequence[Entrant], seeds: range) -> pd.DataFrame:
     """``trainings.csv``'s table: one row per finished training of ``entrants``."""
     rows = []
     for entrant in entrants:
-        for seed in range(seeds):
+        for seed in seeds:
             summary = read_train_summary(TrainLayout(training_dir(out, entrant.label, seed))
                                          .summary)
             if summary is None:
@@ -444,6 +453,8 @@ class Report:
     comparison: pd.DataFrame
     duel: pd.DataFrame | None
     verdict: str
+    confirm_trainings: pd.DataFrame | None
+    confirmed_duel: pd.DataFrame | None
     arena: str
     budget: int
     seeds: int
@@ -452,18 +463,27 @@ class Report:
 
 
 def build_report(trainings: pd.DataFrame, *, arena: str, budget: int, seeds: int,
-                 command: str, notes: Sequence[str] = ()) -> Report:
-    """The per-robot table, the head-to-head of the best of each origin and its verdict."""
+                 command: str, notes: Sequence[str] = (),
+                 confirmation: pd.DataFrame | None = None) -> Report:
+    """The per-robot table, the head-to-head of the best of each origin and its verdict:
+    from ``confirmation`` (the chosen two's trainings under fresh seeds, as
+    :func:`collect` gives them) when it holds both, else from ``trainings`` (biased
+    towards the chosen: see the module)."""
     comparison = comparison_table(trainings)
     evolved = best_of(comparison, "evolved") if not comparison.empty else None
     designed = best_of(comparison, "designed") if not comparison.empty else None
     if evolved is None or designed is None:
         missing = "evolved" if evolved is None else "hand-made"
         return Report(trainings, comparison, None, f"no head-to-head: no {missing} robot "
-                      "has a finished training", arena, budget, seeds, command, tuple(notes))
+                      "has a finished training", None, None, arena, budget, seeds, command,
+                      tuple(notes))
     duel = head_to_head(trainings, evolved, designed)
-    return Report(trainings, comparison, duel, verdict(duel, evolved, designed, arena), arena,
-                  budget, seeds, command, tuple(notes))
+    confirmed = None
+    if confirmation is not None and {evolved, designed} <= set(confirmation["robot"]):
+        confirmed = head_to_head(confirmation, evolved, designed)
+    judged = duel if confirmed is None else confirmed
+    return Report(trainings, comparison, duel, verdict(judged, evolved, designed, arena),
+                  confirmation, confirmed, arena, budget, seeds, command, tuple(notes))
 
 
 def write_report(out: Path, report: Report) -> Path:
@@ -474,10 +494,16 @@ def write_report(out: Path, report: Report) -> Path:
     """
     from evo.run.files import write_csv, write_text
 
-    write_csv(out / TRAININGS, report.trainings)
+    rows = [report.trainings.assign(confirmation=False)]
+    if report.confirm_trainings is not None:
+        rows.append(report.confirm_trainings.assign(confirmation=True))
+    write_csv(out / TRAININGS, pd.concat(rows, ignore_index=True))
     write_csv(out / COMPARISON, report.comparison)
     if report.duel is not None:
-        write_csv(out / HEAD_TO_HEAD, report.duel)
+        duels = [report.duel.assign(seeds="choice")]
+        if report.confirmed_duel is not None:
+            duels.append(report.confirmed_duel.assign(seeds="confirmation"))
+        write_csv(out / HEAD_TO_HEAD, pd.concat(duels, ignore_index=True))
     write_text(out / REPORT, _markdown(report))
     return out / REPORT
 
@@ -520,12 +546,23 @@ def _markdown(report: Report) -> str:
             "better).\n",
             markdown_table(report.duel),
         ]
+    if report.confirmed_duel is not None and report.confirm_trainings is not None:
+        fresh = sorted(set(report.confirm_trainings["seed"]))
+        lines += [
+            f"### Confirmation under fresh seeds {', '.join(map(str, fresh))}\n",
+            "The same two robots trained again under seeds the choice did not see; the "
+            "verdict is read here.\n",
+            markdown_table(report.confirmed_duel),
+        ]
     lines += [
         f"**Verdict:** {report.verdict}.\n",
         "Selection bias: each side's best is the robot that did best in these same "
         "retrainings, so its mean is biased upwards (the more robots a side has, the more "
-        "so), and the interval of the difference does not account for the choice. A "
-        "confirmation would retrain the two chosen robots under fresh seeds.\n",
+        "so), and the interval of the difference does not account for the choice. "
+        + ("The verdict is therefore read from the confirmation under fresh seeds.\n"
+           if report.confirmed_duel is not None else
+           "A confirmation (`--confirm C`) retrains the two chosen robots under fresh "
+           "seeds and reads the verdict there.\n"),
     ]
     if report.notes:
         lines += ["## Notes\n", *(f"- {note}" for note in report.notes), ""]
@@ -545,6 +582,7 @@ class Options:
     seeds: int
     jobs: int
     overrides: tuple[str, ...]
+    confirm: int = 0
 
 
 def parse_args(argv: Sequence[str] | None) -> Options:
@@ -563,12 +601,17 @@ def parse_args(argv: Sequence[str] | None) -> Options:
     cli.add_argument("--arena", choices=("clean", "cluttered"), default=None,
                      help="the arena (env=...; default: the one the runs evolved in, "
                           "else the config's: clean)")
+    cli.add_argument("--confirm", type=int, default=0, metavar="C",
+                     help="train the best evolved and best hand-made robot again under C "
+                          "fresh seeds and judge them there (default 0: no confirmation)")
     cli.add_argument("--jobs", type=int, default=1, help="trainings run at a time")
     cli.add_argument("overrides", nargs="*",
                      help="config overrides as for python evo/main.py +exp=train")
     args = cli.parse_args(argv)
     if args.seeds < 2:
         cli.error(f"--seeds: expected at least 2 (an interval over seeds), got {args.seeds}")
+    if args.confirm == 1 or args.confirm < 0:
+        cli.error(f"--confirm: expected 0 or at least 2 fresh seeds, got {args.confirm}")
     if args.jobs < 1:
         cli.error(f"--jobs: expected at least 1, got {args.jobs}")
     if args.budget is not None and args.budget < 1:
@@ -577,7 +620,7 @@ def parse_args(argv: Sequence[str] | None) -> Options:
                  *([f"learner.total_steps={args.budget}"] if args.budget else []),
                  *args.overrides]
     return Options(tuple(args.runs), args.robots, args.out, args.seeds, args.jobs,
-                   tuple(overrides))
+                   tuple(overrides), args.confirm)
 
 
 def compare(options: Options, *, command: str, log: Callable[[str], None] = print) -> Report:
@@ -598,7 +641,8 @@ def compare(options: Options, *, command: str, log: Callable[[str], None] = prin
                 *designed_entrants(options.robots, limits)]
     check_labels(entrants)
     open_folder(options.out, cfg, overrides)
-    todo = plan(options.out, entrants, options.seeds)
+    seeds = range(options.seeds)
+    todo = plan(options.out, entrants, seeds)
     log(f"{len(entrants) * options.seeds - len(todo)} of {len(entrants) * options.seeds} "
         f"trainings already done; {len(todo)} to run")
     failed = run_trainings(todo, parts, limits, threads=int(cfg.torch_threads),
@@ -607,10 +651,31 @@ def compare(options: Options, *, command: str, log: Callable[[str], None] = prin
     notes = [f"{e.label} evolved in the {e.run_arena} arena, not the {arena} one"
              for e in entrants if e.run_arena and e.run_arena != arena]
     notes += [f"failed (run the same command again to retry): {f}" for f in failed]
-    report = build_report(collect(options.out, entrants, options.seeds), arena=arena,
-                          budget=budget, seeds=options.seeds, command=command, notes=notes)
+    trainings = collect(options.out, entrants, seeds)
+    confirmation = None
+    if options.confirm:
+        chosen = chosen_entrants(trainings, entrants)
+        fresh = range(options.seeds, options.seeds + options.confirm)
+        todo = plan(options.out, chosen, fresh)
+        log(f"confirmation of {' and '.join(e.label for e in chosen) or 'nothing yet'}: "
+            f"{len(todo)} trainings to run under seeds {fresh.start}..{fresh.stop - 1}")
+        failed = run_trainings(todo, parts, limits, threads=int(cfg.torch_threads),
+                               jobs=options.jobs, log=log)
+        notes += [f"failed (run the same command again to retry): {f}" for f in failed]
+        confirmation = collect(options.out, chosen, fresh)
+    report = build_report(trainings, arena=arena, budget=budget, seeds=options.seeds,
+                          command=command, notes=notes, confirmation=confirmation)
     write_report(options.out, report)
     return report
+
+
+def chosen_entrants(trainings: pd.DataFrame, entrants: Sequence[Entrant]) -> list[Entrant]:
+    """The best evolved and the best hand-made robot of ``trainings`` (those present)."""
+    comparison = comparison_table(trainings)
+    if comparison.empty:
+        return []
+    best = {best_of(comparison, "evolved"), best_of(comparison, "designed")}
+    return [e for e in entrants if e.label in best]
 
 
 def runs_arena(options: Options, log: Callable[[str], None] = print) -> list[str]:

@@ -102,7 +102,7 @@ def comparison(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str
         shutil.copy(REPO / "robots" / f"{name}.json", robots / f"{name}.json")
     synthetic_run(root / "runs" / "E+L_seed0", REPO / "robots" / "inchworm.json")
     argv = ["--runs", str(root / "runs"), "--robots", str(robots), "--out", str(root / "out"),
-            "--seeds", "2", *TINY]  # the arena: the run's (its config.yaml's env.name)
+            "--seeds", "2", "--confirm", "2", *TINY]  # arena: the run's config.yaml's env
     assert main(argv) == 0
     return root / "out", argv
 
@@ -110,7 +110,8 @@ def comparison(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str
 def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
         comparison: tuple[Path, list[str]]) -> None:
     out, _ = comparison
-    trainings = pd.read_csv(out / "trainings.csv")
+    everything = pd.read_csv(out / "trainings.csv")
+    trainings = everything[~everything["confirmation"]]
     assert sorted(zip(trainings["robot"], trainings["seed"], strict=True)) == [
         (robot, seed) for robot in ("E+L_seed0", "four_wheeler", "twisted_four_wheeler")
         for seed in (0, 1)], "one row per robot and seed"
@@ -140,7 +141,7 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
     worst = table.set_index("robot")["success_rate_worst"]
     assert np.allclose(worst.sort_index(), trainings.groupby("robot")["success_rate"].min())
 
-    duel = pd.read_csv(out / "head_to_head.csv").set_index("metric")
+    duel = pd.read_csv(out / "head_to_head.csv").query("seeds == 'choice'").set_index("metric")
     best_designed = table[table["origin"] == "designed"].iloc[0]["robot"]
     evolved, designed = (trainings[trainings["robot"] == r] for r in ("E+L_seed0", best_designed))
     assert duel.loc["eval_mean_return", "difference"] == pytest.approx(
@@ -148,6 +149,19 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
     report = (out / "comparison.md").read_text()
     assert "E+L_seed0 (evolved)" in report and f"{best_designed} (hand-made)" in report
     assert "**Verdict:**" in report and "Selection bias" in report
+
+    # The confirmation: the two chosen robots again under fresh seeds 2 and 3, and the
+    # verdict read from those trainings alone.
+    fresh = everything[everything["confirmation"]]
+    assert sorted(zip(fresh["robot"], fresh["seed"], strict=True)) == sorted(
+        (r, s) for r in ("E+L_seed0", best_designed) for s in (2, 3))
+    confirmed = pd.read_csv(out / "head_to_head.csv").query("seeds == 'confirmation'")
+    confirmed = confirmed.set_index("metric")
+    evolved, designed = (fresh[fresh["robot"] == r] for r in ("E+L_seed0", best_designed))
+    difference = evolved["eval_mean_return"].mean() - designed["eval_mean_return"].mean()
+    assert confirmed.loc["eval_mean_return", "difference"] == pytest.approx(difference)
+    assert f"{difference:+.3f}" in report.split("**Verdict:**")[1].splitlines()[0]
+    assert "fresh seeds 2, 3" in report
 
 
 def test_a_rerun_skips_finished_trainings_and_refuses_another_config(
@@ -163,6 +177,6 @@ def test_a_rerun_skips_finished_trainings_and_refuses_another_config(
     assert redo.is_file(), "the missing training ran again"
     assert all(p.stat().st_mtime_ns == stamps[p] for p in summaries if p != redo), \
         "a finished training was trained again"
-    assert len(pd.read_csv(out / "trainings.csv")) == 6
+    assert len(pd.read_csv(out / "trainings.csv")) == 6 + 4, "and the confirmation's 4"
     assert main([*argv, "learner.lr=0.5"]) == 2
     assert "another config" in capsys.readouterr().err
