@@ -33,7 +33,10 @@ Into ``--out``:
   worst seed, of each metric;
 * ``head_to_head.csv`` and ``comparison.md``: the best evolved robot against the best
   hand-made one (best: the highest mean evaluation return over seeds), the differences
-  with Welch 95 % intervals over seeds, and a one-line verdict.
+  with Welch 95 % intervals over seeds, and a one-line verdict;
+* ``comparison.png``: every robot's metrics with their intervals, by origin, the two
+  chosen ringed; ``chosen.png``: pictures of the two chosen robots (MuJoCo's offscreen
+  renderer: ``MUJOCO_GL=egl``; when it cannot render, the report's notes say why).
 
 **Selection bias and ``--confirm C``.** Each side's best is the robot that did best in
 these same trainings, so its mean is biased upwards, the more so the more robots a side
@@ -59,7 +62,7 @@ import shlex
 import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -69,13 +72,14 @@ import scipy.stats
 from omegaconf import DictConfig, OmegaConf
 
 from analysis.load import find_run_dirs, run_ids
-from analysis.markdown import fmt_ci, markdown_table, safe_name
+from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table, safe_name
 from evo.run.layout import RunLayout, TrainLayout
 from evo.run.records import read_run_summary, read_train_summary
 
 if TYPE_CHECKING:
     from evo.edge import TrainingParts
     from evo.robot import Limits, Robot
+    from evo.robot.builder import PhysicsParams
 
 Origin = Literal["evolved", "designed"]
 METRICS: dict[str, str] = {
@@ -92,6 +96,7 @@ GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
 ``eval_time_to_target`` simulated seconds (empty when no episode reached the target),
 ``wall_seconds`` the training's wall time; the file adds ``confirmation``."""
 CONFIDENCE = 0.95
+COMPARISON_FIGURE, CHOSEN_FIGURE = "comparison.png", "chosen.png"
 TRAININGS, COMPARISON, HEAD_TO_HEAD, REPORT, SETTINGS = (
     "trainings.csv", "comparison.csv", "head_to_head.csv", "comparison.md", "settings.json")
 """The files of a comparison folder."""
@@ -201,6 +206,11 @@ def training_dir(out: Path, label: str, seed: int) -> Path:
     return out / "trainings" / f"{safe_name(label)}_seed{seed}"
 
 
+def robot_file(out: Path, label: str) -> Path:
+    """``<out>/robots/<robot>.json``: the robot compared under ``label``."""
+    return out / "robots" / f"{safe_name(label)}.json"
+
+
 def open_folder(out: Path, cfg: DictConfig, overrides: Sequence[str]) -> None:
     """Create ``out`` or continue it; refuse a folder trained under another config
     (compared by what decides a training's numbers: ``evo.edge.what_trains``)."""
@@ -241,10 +251,8 @@ def plan(out: Path, entrants: Sequence[Entrant], seeds: range) -> list[Training]
 
     todo = []
     for entrant in entrants:
-        robot_file = out / "robots" / f"{safe_name(entrant.label)}.json"
-        robot_file.parent.mkdir(parents=True, exist_ok=True)
-        save_robot(entrant.robot, robot_file)
-        todo += [Training(entrant.label, robot_file, s, training_dir(out, entrant.label, s))
+        path = save_robot(entrant.robot, robot_file(out, entrant.label))
+        todo += [Training(entrant.label, path, s, training_dir(out, entrant.label, s))
                  for s in seeds
                  if not TrainLayout(training_dir(out, entrant.label, s)).summary.is_file()]
     return todo
@@ -486,11 +494,12 @@ def build_report(trainings: pd.DataFrame, *, arena: str, budget: int, seeds: int
                   confirmation, confirmed, arena, budget, seeds, command, tuple(notes))
 
 
-def write_report(out: Path, report: Report) -> Path:
-    """``trainings.csv``, ``comparison.csv``, ``head_to_head.csv`` and ``comparison.md``.
+def write_report(out: Path, report: Report) -> Report:
+    """``trainings.csv``, ``comparison.csv``, ``head_to_head.csv``, the figures
+    (:func:`write_figures`) and ``comparison.md``.
 
     Returns:
-        The path of ``comparison.md``.
+        The report as written: its notes add why a figure is missing.
     """
     from evo.run.files import write_csv, write_text
 
@@ -504,8 +513,110 @@ def write_report(out: Path, report: Report) -> Path:
         if report.confirmed_duel is not None:
             duels.append(report.confirmed_duel.assign(seeds="confirmation"))
         write_csv(out / HEAD_TO_HEAD, pd.concat(duels, ignore_index=True))
-    write_text(out / REPORT, _markdown(report))
-    return out / REPORT
+    figures, notes = write_figures(out, report.comparison, report.arena,
+                                   figure=out / COMPARISON_FIGURE, pictures=out / CHOSEN_FIGURE)
+    report = replace(report, notes=(*report.notes, *notes))
+    write_text(out / REPORT, _markdown(report, out, figures))
+    return report
+
+
+# ---------------------------------------------------------------- the figures
+
+
+def write_figures(folder: Path, comparison: pd.DataFrame, arena: str, *, figure: Path,
+                  pictures: Path) -> tuple[list[Path], list[str]]:
+    """The comparison's figures: ``figure``, every robot's metrics with their intervals
+    (:func:`analysis.plots.plot_designer`), and ``pictures``, the best evolved robot
+    (left) and the best hand-made one (right), read from ``folder``'s robot files and
+    built with its settings' physics.
+
+    Args:
+        folder: The comparison folder (its ``robots/`` and ``settings.json``).
+        comparison: :func:`comparison_table` (or its ``comparison.csv``).
+        arena: The arena, for the title.
+        figure: The PNG of the metrics.
+        pictures: The PNG of the two robots.
+
+    Returns:
+        The figures written (none for an empty table), and a note for each that could
+        not be (no OpenGL to render with, a robot file unreadable), saying why.
+    """
+    from analysis.plots import plot_designer
+    from evo.robot.render import RenderError
+
+    if comparison.empty:
+        return [], []
+    chosen = [r for r in (best_of(comparison, "evolved"), best_of(comparison, "designed"))
+              if r is not None]
+    plot_designer(comparison, chosen=chosen, path=figure, title=(
+        f"Evolved against hand-made robots, {arena} arena: mean over seeds, 95 % CI"))
+    if len(chosen) < 2:
+        return [figure], []
+    try:
+        chosen_pictures(folder, comparison, chosen, pictures)
+    except (RenderError, OSError, ValueError, KeyError) as err:
+        return [figure], [f"no pictures of the chosen robots ({pictures.name}): {err}"]
+    return [figure, pictures], []
+
+
+def chosen_pictures(folder: Path, comparison: pd.DataFrame, chosen: Sequence[str],
+                    path: Path) -> Path:
+    """Pictures of the robots ``chosen`` side by side, each titled with its label and
+    origin, and its mean success rate and evaluation return over seeds.
+
+    Raises:
+        evo.robot.render.RenderError: No OpenGL backend works (``MUJOCO_GL=egl``).
+        OSError, ValueError: An unreadable robot file or ``settings.json``.
+    """
+    from analysis.plots import ORIGIN_LABELS
+    from evo.robot import load_robot
+    from evo.robot.gallery import contact_sheet
+
+    limits, physics = _folder_physics(folder)
+    robots = [load_robot(robot_file(folder, label), limits) for label in chosen]
+    rows = comparison.set_index("robot")
+    titles = []
+    for label in chosen:
+        row = rows.loc[label]
+        titles.append(f"{label} ({ORIGIN_LABELS[str(row['origin'])]})\nsuccess "
+                      f"{fmt_number(row['success_rate_mean'], 2)}, eval return "
+                      f"{fmt_number(row['eval_mean_return_mean'], 2)}")
+    return contact_sheet(robots, physics, path, titles=titles)
+
+
+def _folder_physics(folder: Path) -> tuple[Limits, PhysicsParams]:
+    """The robot limits and module constants a comparison folder trained with (its
+    ``settings.json``; the defaults for a folder without one)."""
+    from evo.edge import limits_of, physics_of
+    from evo.robot import Limits
+    from evo.robot.builder import PhysicsParams
+
+    path = folder / SETTINGS
+    if not path.is_file():
+        return Limits(), PhysicsParams()
+    try:
+        cfg = OmegaConf.create(str(json.loads(path.read_text())["config"]))
+    except (json.JSONDecodeError, KeyError) as err:
+        raise ValueError(f"{path}: no readable config ({err!r})") from None
+    if not isinstance(cfg, DictConfig):
+        raise ValueError(f"{path}: its config is not a mapping")
+    return limits_of(cfg), physics_of(cfg)
+
+
+def folder_arena(folder: Path) -> str:
+    """The arena a comparison folder's robots trained in (its ``trainings.csv``).
+
+    Raises:
+        DesignerError: For a folder without trainings, or trained in several arenas.
+    """
+    path = folder / TRAININGS
+    try:
+        arenas: list[str] = sorted({str(a) for a in pd.read_csv(path)["arena"]})
+    except (OSError, KeyError, pd.errors.EmptyDataError) as err:
+        raise DesignerError(f"{path}: no trainings to read the arena from ({err!r})") from None
+    if len(arenas) != 1:
+        raise DesignerError(f"{path}: expected one arena, found {arenas or 'none'}")
+    return arenas[0]
 
 
 def _per_robot_markdown(comparison: pd.DataFrame) -> pd.DataFrame:
@@ -521,8 +632,9 @@ def _per_robot_markdown(comparison: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
-def _markdown(report: Report) -> str:
-    """``comparison.md``."""
+def _markdown(report: Report, out: Path, figures: Sequence[Path] = ()) -> str:
+    """``comparison.md``, linking the ``figures`` written into ``out``."""
+    links = {path.name: path for path in figures}
     lines = [
         "# Evolution against the designer\n",
         f"`{report.command}`\n",
@@ -536,8 +648,15 @@ def _markdown(report: Report) -> str:
         "## Per robot (best mean evaluation return first)\n",
         markdown_table(_per_robot_markdown(report.comparison)) if not report.comparison.empty
         else "_(no training finished yet)_\n",
-        "## Head to head\n",
     ]
+    if COMPARISON_FIGURE in links:
+        lines.append(figure_link(links[COMPARISON_FIGURE], out, "every robot's success rate, "
+                                 "evaluation return and time to target with 95 % intervals; "
+                                 "the chosen two ringed"))
+    lines.append("## Head to head\n")
+    if CHOSEN_FIGURE in links:
+        lines.append(figure_link(links[CHOSEN_FIGURE], out,
+                                 "the best evolved robot (left) and the best hand-made one"))
     if report.duel is not None:
         lines += [
             "The best evolved robot against the best hand-made one, best meaning the "
@@ -665,8 +784,7 @@ def compare(options: Options, *, command: str, log: Callable[[str], None] = prin
         confirmation = collect(options.out, chosen, fresh)
     report = build_report(trainings, arena=arena, budget=budget, seeds=options.seeds,
                           command=command, notes=notes, confirmation=confirmation)
-    write_report(options.out, report)
-    return report
+    return write_report(options.out, report)
 
 
 def chosen_entrants(trainings: pd.DataFrame, entrants: Sequence[Entrant]) -> list[Entrant]:

@@ -14,6 +14,8 @@ no global state, no display needed), returns it, and writes a PNG when given ``p
   the early-slope study (:mod:`analysis.early_slope`).
 * :func:`plot_seed_scatter`: fitness under one training seed against another, one point
   per structure (the noise ceiling, :mod:`analysis.noise_ceiling`).
+* :func:`plot_designer`: every retrained robot's metrics with their intervals, evolved
+  against hand-made (:mod:`analysis.designer`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.transforms import blended_transform_factory
 
 from analysis.population import best_so_far, population_trace
 from analysis.tables import CURVE_COLUMNS, method_order, require_columns
@@ -37,6 +41,9 @@ METHOD_COLORS: dict[str, str] = {
     "E+L": "tab:red",
     "E+L+I": "tab:purple",  # E+L with policy inheritance, the fifth arm
 }
+ORIGIN_COLORS: dict[str, str] = {"evolved": "tab:red", "designed": "tab:blue"}
+"""A robot's origin in :mod:`analysis.designer`: evolved in red as E+L, hand-made in blue."""
+ORIGIN_LABELS: dict[str, str] = {"evolved": "evolved", "designed": "hand-made"}
 
 
 def new_figure(n_axes: int = 1, *, width: float = 6.4, height: float = 4.0,
@@ -365,4 +372,72 @@ def plot_noise_study(table: pd.DataFrame, *, path: str | Path | None = None) -> 
         ax.set_ylabel(label)
         if ax.get_legend_handles_labels()[0]:  # a setting with two or more budgets
             ax.legend(fontsize=8)
+    return finish(fig, path)
+
+
+# ---------------------------------------------------------------- evolution against the designer
+
+DESIGNER_PANELS = (("success_rate", "success rate", "higher is better"),
+                   ("eval_mean_return", "evaluation return", "higher is better"),
+                   ("eval_time_to_target", "time to target (s)", "lower is better"))
+"""The panels of :func:`plot_designer`: the metric's column prefix, its title, which way."""
+
+
+def plot_designer(comparison: pd.DataFrame, *, chosen: Sequence[str] = (), title: str = "",
+                  path: str | Path | None = None) -> Figure:
+    """Every robot's mean over seeds with its 95 % interval, one panel per metric.
+
+    Args:
+        comparison: :func:`analysis.designer.comparison_table` (or its ``comparison.csv``):
+            ``robot``, ``origin`` and ``<metric>_mean``, ``_low``, ``_high`` per metric;
+            robots drawn top to bottom in its order. A missing interval (one seed) draws
+            the point alone; a missing mean (no seed reached the target) a dash.
+        chosen: The robots to mark (ringed, bold label): the best of each origin.
+        title: The figure's title.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes per metric (:data:`DESIGNER_PANELS`), robots on the y axis,
+        coloured by origin (:data:`ORIGIN_COLORS`).
+    """
+    require_columns(comparison, ("robot", "origin", *(f"{m}_{k}" for m, _, _ in DESIGNER_PANELS
+                                                      for k in ("mean", "low", "high"))),
+                    "comparison table")
+    n = len(comparison)
+    fig, axes = new_figure(len(DESIGNER_PANELS), width=3.4, height=1.9 + 0.28 * max(n, 1),
+                           sharey=True)
+    y = np.arange(n)
+    marked = comparison["robot"].isin(list(chosen)).to_numpy()
+    for ax, (metric, name, better) in zip(axes, DESIGNER_PANELS, strict=True):
+        mean, low, high = (comparison[f"{metric}_{k}"].to_numpy(dtype=float)
+                           for k in ("mean", "low", "high"))
+        for origin, color in ORIGIN_COLORS.items():
+            rows = (comparison["origin"] == origin).to_numpy() & np.isfinite(mean)
+            spans = rows & np.isfinite(low) & np.isfinite(high)
+            ax.errorbar(mean[spans], y[spans], xerr=np.clip([mean[spans] - low[spans],
+                                                             high[spans] - mean[spans]], 0, None),
+                        fmt="none", ecolor=color, capsize=3)
+            ax.scatter(mean[rows], y[rows], s=28, color=color, zorder=3)
+        ring = marked & np.isfinite(mean)
+        ax.scatter(mean[ring], y[ring], s=130, facecolors="none", edgecolors="black",
+                   linewidths=1.4, zorder=4)
+        at_left = blended_transform_factory(ax.transAxes, ax.transData)
+        for i in np.flatnonzero(~np.isfinite(mean)):
+            ax.text(0.03, y[i], "not reached" if metric == "eval_time_to_target" else "–",
+                    transform=at_left, va="center", fontsize=8, color="0.4")
+        ax.set(title=name, xlabel=better)
+        ax.grid(axis="x", color="0.9")
+        if not np.isfinite(mean).any():
+            ax.set_xticks([])  # no values: no scale
+    axes[0].set_yticks(y, [str(r) for r in comparison["robot"]])
+    axes[0].set_ylim(n - 0.5, -0.5)  # the table's first row on top
+    for label, bold in zip(axes[0].get_yticklabels(), marked, strict=True):
+        label.set_fontweight("bold" if bold else "normal")
+    handles = [Line2D([], [], ls="", marker="o", color=color, label=ORIGIN_LABELS[origin])
+               for origin, color in ORIGIN_COLORS.items()]
+    handles.append(Line2D([], [], ls="", marker="o", markersize=11, markerfacecolor="none",
+                          markeredgecolor="black", label="chosen: best of its origin"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize="small")
+    if title:
+        fig.suptitle(title)
     return finish(fig, path)

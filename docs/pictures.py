@@ -1,12 +1,15 @@
 """Make the README's pictures with the project's own code.
 
     MUJOCO_GL=egl python docs/pictures.py [--curve <train run>] [--run <evolution run>]
+        [--designer <comparison folder> ...]
 
 Writes ``docs/robots.png`` (the example robots), ``docs/arena.png`` (the cluttered
 arena with the four-wheeler), given a training run (``+exp=train``) ``docs/curve.png``,
 and given an evolution run ``docs/evolution.png`` (every robot's fitness in birth order
 with the population's best and mean), ``docs/best_curves.png`` (learning curves of the
-best robots) and ``docs/best.png`` (the best robots).
+best robots) and ``docs/best.png`` (the best robots), and given comparison folders of
+``python -m analysis.designer`` ``docs/designer_<arena>.png`` (every robot's metrics,
+evolved against hand-made) and ``docs/designer_robots_<arena>.png`` (the best of each).
 """
 
 from __future__ import annotations
@@ -17,8 +20,9 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 
-from analysis import plots
+from analysis import designer, plots
 from analysis.load import load_runs
 from evo.envs.gym_env import ReachGymEnv
 from evo.record import read_curve
@@ -33,6 +37,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--curve", type=Path, help="run directory of python evo/main.py +exp=train")
     parser.add_argument("--run", type=Path, help="run directory of an evolution")
+    parser.add_argument("--designer", type=Path, nargs="+", default=[],
+                        help="output folders of python -m analysis.designer")
     args = parser.parse_args()
     robots = [load_robot(p) for p in sorted(glob.glob("robots/*.json"))]
     print(contact_sheet(robots, PhysicsParams(), HERE / "robots.png"))
@@ -56,6 +62,8 @@ def main() -> None:
         print(HERE / "curve.png")
     if args.run is not None:
         evolution_pictures(args.run)
+    for folder in args.designer:
+        designer_pictures(folder)
 
 
 def evolution_pictures(run_dir: Path, top: int = 4) -> None:
@@ -69,6 +77,17 @@ def evolution_pictures(run_dir: Path, top: int = 4) -> None:
     chosen = [load_robot(run_dir / "robots" / f"{name}.json") for name in best["name"]]
     print(contact_sheet(chosen, PhysicsParams(), HERE / "best.png"))
     print(HERE / "evolution.png", HERE / "best_curves.png")
+
+
+def designer_pictures(folder: Path) -> None:
+    """``docs/designer_<arena>.png`` and ``docs/designer_robots_<arena>.png``, drawn
+    again from a comparison folder's tables and robots as its own figures are."""
+    arena = designer.folder_arena(folder)
+    comparison = pd.read_csv(folder / designer.COMPARISON, dtype={"robot": str})
+    written, notes = designer.write_figures(
+        folder, comparison, arena, figure=HERE / f"designer_{arena}.png",
+        pictures=HERE / f"designer_robots_{arena}.png")
+    print(*written, *notes, sep="\n")
 
 
 if __name__ == "__main__":

@@ -10,18 +10,33 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from functools import cache
 from pathlib import Path
 
+import matplotlib.colors
+import matplotlib.image
 import numpy as np
 import pandas as pd
 import pytest
 import torch
+from matplotlib.axes import Axes
+from matplotlib.collections import PathCollection
 
-from analysis.designer import main, mean_ci, welch_difference
+from analysis.designer import (
+    TRAINING_COLUMNS,
+    comparison_table,
+    folder_arena,
+    main,
+    mean_ci,
+    welch_difference,
+    write_figures,
+)
+from analysis.plots import ORIGIN_COLORS, plot_designer
 from evo.envs.params import EnvConfig, TaskParams
 from evo.learners.rollouts import PolicyEvaluation, evaluate_policy
 from evo.robot import load_robot, save_robot
 from evo.robot.builder import PhysicsParams
+from evo.robot.render import RenderError, render_image
 from evo.run.layout import RunLayout
 from evo.run.records import HistoryRow, RunSummary, write_history, write_run_summary
 
@@ -72,6 +87,46 @@ def test_intervals_hold_their_estimate_and_degenerate_cases_say_so() -> None:
     assert diff == pytest.approx(1.1 - 0.05) and low < diff < high
     assert low > 0, "a clear difference's interval lies above 0"
     assert math.isnan(welch_difference([1.0], [0.0, 1.0])[1]), "one seed: no interval"
+
+
+def test_the_figure_draws_every_robot_in_order_and_survives_missing_values() -> None:
+    one_seed = dict(run="", structure="s", arena="clean", env_steps=1, fitness=0.0,
+                    eval_episodes=3, wall_seconds=1.0)
+    trainings = pd.DataFrame([
+        dict(one_seed, robot="E+L_seed0", origin="evolved", seed=0, success_rate=1.0,
+             eval_mean_return=9.0, eval_time_to_target=2.0),
+        dict(one_seed, robot="E+L_seed0", origin="evolved", seed=1, success_rate=0.5,
+             eval_mean_return=7.0, eval_time_to_target=3.0),
+        dict(one_seed, robot="snake", origin="designed", seed=0, success_rate=0.0,
+             eval_mean_return=8.0, eval_time_to_target=math.nan),  # one seed, none reached
+        dict(one_seed, robot="inchworm", origin="designed", seed=0, success_rate=1.0,
+             eval_mean_return=1.0, eval_time_to_target=1.0),
+    ], columns=list(TRAINING_COLUMNS))
+    table = comparison_table(trainings)
+    fig = plot_designer(table, chosen=["E+L_seed0", "snake"])
+    fig.canvas.draw()
+    axes = fig.axes
+    assert [ax.get_title() for ax in axes] == ["success rate", "evaluation return",
+                                               "time to target (s)"]
+    ticks = axes[0].get_yticklabels()
+    assert [t.get_text() for t in ticks] == ["E+L_seed0", "snake", "inchworm"], "table order"
+    assert [t.get_fontweight() for t in ticks] == ["bold", "bold", "normal"], "chosen marked"
+    assert axes[0].get_ylim()[0] > axes[0].get_ylim()[1], "the table's first row on top"
+    ttt = axes[2]
+    assert [t.get_text() for t in ttt.texts] == ["not reached"], "snake never reached it"
+    assert {tuple(p) for p in dots(ttt)} == {(2.5, 0.0), (1.0, 2.0)}, "no dot for snake"
+    colours = {tuple(c.get_facecolor()[0][:3]) for c in axes[1].collections
+               if isinstance(c, PathCollection) and len(c.get_offsets()) and
+               len(c.get_facecolor())}
+    assert colours == {matplotlib.colors.to_rgb(c) for c in ORIGIN_COLORS.values()}, \
+        "coloured by origin"
+
+
+def dots(ax: Axes) -> np.ndarray:
+    """The filled points of ``ax``'s scatter collections (not the hollow rings)."""
+    filled = [c.get_offsets() for c in ax.collections
+              if isinstance(c, PathCollection) and len(c.get_facecolor())]
+    return np.vstack([f for f in filled if len(f)])
 
 
 def synthetic_run(run_dir: Path, robot_file: Path) -> str:
@@ -162,6 +217,60 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
     assert confirmed.loc["eval_mean_return", "difference"] == pytest.approx(difference)
     assert f"{difference:+.3f}" in report.split("**Verdict:**")[1].splitlines()[0]
     assert "fresh seeds 2, 3" in report
+
+    # The figures: every robot's metrics, and the two chosen robots' pictures.
+    figure = matplotlib.image.imread(out / "comparison.png")
+    assert figure.shape[1] > 1000 and figure.shape[0] > 250 and figure.std() > 0.05, \
+        figure.shape
+    assert "](comparison.png)" in report
+    if not can_render():
+        assert "no pictures of the chosen robots" in report and "MUJOCO_GL" in report
+        return
+    pictures = matplotlib.image.imread(out / "chosen.png")
+    assert pictures.shape[0] >= 240 and pictures.shape[1] >= 2 * 320, pictures.shape
+    left, right = np.array_split(pictures[..., :3], 2, axis=1)
+    assert left.std() > 0.05 and right.std() > 0.05, "a robot on each side"
+    assert "](chosen.png)" in report and "no pictures" not in report
+
+
+@cache
+def can_render() -> bool:
+    """Whether MuJoCo can render offscreen in this process (``MUJOCO_GL``)."""
+    try:
+        render_image(FOUR_WHEELER, 8, 8)
+    except RenderError:
+        return False
+    return True
+
+
+def test_a_comparison_without_opengl_is_done_and_says_why_it_has_no_pictures(
+        comparison: tuple[Path, list[str]], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    out, argv = comparison
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("*.png"))
+    argv = [str(copy) if arg == str(out) else arg for arg in argv]
+
+    def no_gl(*args: object, **kwargs: object) -> None:
+        raise RenderError("no OpenGL context for offscreen rendering (MUJOCO_GL=none)")
+
+    monkeypatch.setattr("evo.robot.render.render_image", no_gl)
+    assert main(argv) == 0, "the comparison is done all the same"
+    report = (copy / "comparison.md").read_text()
+    notes = report.split("## Notes")[1]
+    assert "no pictures of the chosen robots (chosen.png): no OpenGL context" in notes
+    assert not (copy / "chosen.png").exists() and "](chosen.png)" not in report
+    assert (copy / "comparison.png").is_file() and "](comparison.png)" in report
+    assert (copy / "head_to_head.csv").is_file() and "**Verdict:**" in report
+
+    # docs/pictures.py --designer draws the figures again from the folder's files.
+    assert folder_arena(copy) == "cluttered"
+    docs = tmp_path / "docs"
+    written, notes = write_figures(copy, pd.read_csv(copy / "comparison.csv"), "cluttered",
+                                   figure=docs / "designer_cluttered.png",
+                                   pictures=docs / "designer_robots_cluttered.png")
+    assert written == [docs / "designer_cluttered.png"] and written[0].is_file()
+    assert len(notes) == 1 and "designer_robots_cluttered.png" in notes[0], notes
 
 
 def test_a_rerun_skips_finished_trainings_and_refuses_another_config(

@@ -5,7 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib.pyplot as plt
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 from rich.console import Console
 from rich.table import Table
 
@@ -36,26 +37,40 @@ def size_table(robots: Sequence[Robot]) -> Table:
     return table
 
 
-def contact_sheet(robots: Sequence[Robot], params: PhysicsParams, path: Path) -> Path:
+def contact_sheet(robots: Sequence[Robot], params: PhysicsParams, path: Path,
+                  titles: Sequence[str] | None = None) -> Path:
     """A grid of offscreen pictures of ``robots`` saved as ``path`` (PNG).
+
+    Args:
+        robots: The robots, four to a row.
+        params: The module constants they are built with.
+        path: The PNG to write.
+        titles: One title per robot (a newline starts a second line); default: its
+            name, motors ``m`` and pivots ``n``.
 
     Raises:
         RenderError: no OpenGL backend works (set ``MUJOCO_GL=egl``).
+        ValueError: ``titles`` does not hold one title per robot.
     """
     from evo.robot.render import render_image
 
+    if titles is not None and len(titles) != len(robots):
+        raise ValueError(f"contact_sheet: {len(titles)} titles for {len(robots)} robots")
+    if titles is None:
+        titles = [f"{robot.name}  m={robot.n_motors} n={robot.n_pivots}" for robot in robots]
     images = [render_image(robot, 320, 240, params) for robot in robots]
     cols = min(4, len(images))
     rows = -(-len(images) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+    fig = Figure(figsize=(3.2 * cols, 2.6 * rows))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.flat:
         ax.axis("off")
-    for ax, robot, image in zip(axes.flat, robots, images, strict=False):
+    for ax, title, image in zip(axes.flat, titles, images, strict=False):
         ax.imshow(image)
-        ax.set_title(f"{robot.name}  m={robot.n_motors} n={robot.n_pivots}", fontsize=8)
+        ax.set_title(title, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path
 
 
