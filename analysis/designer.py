@@ -88,6 +88,12 @@ METRICS: dict[str, str] = {
     "eval_time_to_target": "lower",
 }
 """The compared metrics of the deterministic evaluation, and which way is better."""
+RANGES: dict[str, tuple[float, float]] = {
+    "success_rate": (0.0, 1.0),
+    "eval_time_to_target": (0.0, math.inf),
+}
+"""What a metric can be: a per-robot interval is clipped to it (a t-interval over three
+seeds of a success rate can reach past 1)."""
 TRAINING_COLUMNS = ("robot", "origin", "run", "structure", "seed", "arena", "env_steps",
                     "fitness", "success_rate", "eval_mean_return", "eval_time_to_target",
                     "eval_episodes", "wall_seconds")
@@ -377,8 +383,9 @@ def welch_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nd
 
 
 def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
-    """Per robot, the mean over seeds with its 95 % t-interval and the worst seed of
-    each metric (:data:`METRICS`), best mean evaluation return first.
+    """Per robot, the mean over seeds with its 95 % t-interval (clipped to the metric's
+    :data:`RANGES`) and the worst seed of each metric (:data:`METRICS`), best mean
+    evaluation return first.
 
     ``<metric>_seeds`` counts the seeds with a value: for the time to target, the seeds
     under which some evaluation episode reached the target.
@@ -391,6 +398,8 @@ def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
                                   "seeds": len(group)}
         for metric, better in METRICS.items():
             mean, low, high, n = mean_ci(group[metric].to_numpy(dtype=float))
+            floor, ceiling = RANGES.get(metric, (-math.inf, math.inf))
+            low, high = max(low, floor), min(high, ceiling)  # NaN stays NaN
             values = group[metric].to_numpy(dtype=float)
             worst = (np.nanmin if better == "higher" else np.nanmax)(values) if n else math.nan
             row |= {f"{metric}_mean": mean, f"{metric}_low": low, f"{metric}_high": high,
@@ -641,8 +650,9 @@ def _markdown(report: Report, out: Path, figures: Sequence[Path] = ()) -> str:
         f"Every robot retrained from scratch as `+exp=train` does, in the **{report.arena}** "
         f"arena, {report.budget:,} env steps per training, seeds 0..{report.seeds - 1}; "
         "each training then evaluated deterministically (the policy's mean action). Per "
-        "robot: the mean over seeds with its 95 % t-interval over seeds, and the worst "
-        "seed. Time to target: mean simulated seconds to reach the target over the "
+        "robot: the mean over seeds with its 95 % t-interval over seeds (clipped to "
+        "what the metric can be: a success rate to [0, 1], a time to 0 and above), and the "
+        "worst seed. Time to target: mean simulated seconds to reach the target over the "
         "evaluation episodes that reached it, averaged over the seeds under which some "
         "episode did (`seeds reaching`).\n",
         "## Per robot (best mean evaluation return first)\n",

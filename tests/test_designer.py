@@ -190,6 +190,8 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
         mean, low, high = (table[f"{metric}_{k}"] for k in ("mean", "low", "high"))
         shown = low.notna()
         assert ((low[shown] <= mean[shown] + 1e-12) & (mean[shown] <= high[shown] + 1e-12)).all()
+    assert (table["success_rate_low"].dropna() >= 0).all(), "clipped to what a rate can be"
+    assert (table["success_rate_high"].dropna() <= 1).all()
     per_robot = trainings.groupby("robot")["eval_mean_return"]
     means = table.set_index("robot")["eval_mean_return_mean"]
     assert np.allclose(means.sort_index(), per_robot.mean().sort_index())
