@@ -87,6 +87,15 @@ def test_intervals_hold_their_estimate_and_degenerate_cases_say_so() -> None:
     assert diff == pytest.approx(1.1 - 0.05) and low < diff < high
     assert low > 0, "a clear difference's interval lies above 0"
     assert math.isnan(welch_difference([1.0], [0.0, 1.0])[1]), "one seed: no interval"
+    # A success rate's interval stays within [0, 1], a time's above 0, a return's is free.
+    rows = [dict(robot="snake", origin="designed", run="", structure="s", seed=seed,
+                 fitness=0.0, success_rate=rate, eval_mean_return=ret,
+                 eval_time_to_target=time, wall_seconds=1.0)
+            for seed, (rate, ret, time) in enumerate([(0.2, -0.5, 1.0), (1.0, 1.0, 30.0),
+                                                      (1.0, 1.1, 2.0)])]
+    row = comparison_table(pd.DataFrame(rows)).iloc[0]
+    assert row["success_rate_high"] == 1.0 and row["eval_time_to_target_low"] == 0.0
+    assert mean_ci([0.2, 1.0, 1.0])[2] > 1 and row["eval_mean_return_low"] < -1, "unclipped"
 
 
 def test_the_figure_draws_every_robot_in_order_and_survives_missing_values() -> None:
