@@ -31,6 +31,9 @@ Into ``--out``:
   trainings of ``--confirm``);
 * ``comparison.csv``: per robot, the mean over seeds with a 95 % t-interval, and the
   worst seed, of each metric;
+* ``per_method.csv``: per method (each GA run's method, ``designed`` for the hand-made
+  robots), the mean over its robots with a 95 % t-interval over robots: one robot per GA
+  run, so the run is the unit (``comparison.md`` adds the evolved methods' differences);
 * ``head_to_head.csv`` and ``comparison.md``: the best evolved robot against the best
   hand-made one (best: the highest mean evaluation return over seeds), the differences
   with Welch 95 % intervals over seeds, and a one-line verdict;
@@ -94,17 +97,19 @@ RANGES: dict[str, tuple[float, float]] = {
 }
 """What a metric can be: a per-robot interval is clipped to it (a t-interval over three
 seeds of a success rate can reach past 1)."""
-TRAINING_COLUMNS = ("robot", "origin", "run", "structure", "seed", "arena", "env_steps",
+TRAINING_COLUMNS = ("robot", "origin", "method", "run", "structure", "seed", "arena", "env_steps",
                     "fitness", "success_rate", "eval_mean_return", "eval_time_to_target",
                     "eval_episodes", "wall_seconds")
-"""``trainings.csv``: ``robot`` the label compared (run name or file name), ``run`` the
-GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
+"""``trainings.csv``: ``robot`` the label compared (run name or file name), ``method``
+the GA run's method (``E+L``, ``E+L+I``, ...; ``designed`` for a hand-made robot),
+``run`` the GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
 ``eval_time_to_target`` simulated seconds (empty when no episode reached the target),
 ``wall_seconds`` the training's wall time; the file adds ``confirmation``."""
 CONFIDENCE = 0.95
 COMPARISON_FIGURE, CHOSEN_FIGURE = "comparison.png", "chosen.png"
-TRAININGS, COMPARISON, HEAD_TO_HEAD, REPORT, SETTINGS = (
-    "trainings.csv", "comparison.csv", "head_to_head.csv", "comparison.md", "settings.json")
+TRAININGS, COMPARISON, HEAD_TO_HEAD, PER_METHOD, REPORT, SETTINGS = (
+    "trainings.csv", "comparison.csv", "head_to_head.csv", "per_method.csv", "comparison.md",
+    "settings.json")
 """The files of a comparison folder."""
 
 
@@ -123,12 +128,15 @@ class Entrant:
         label: Its name in the comparison: the GA run's name or the robot file's stem.
         origin: ``evolved`` (a GA run's best) or ``designed`` (a hand-made file).
         run: The GA run's directory ("" for a hand-made robot).
+        method: The GA run's method (its ``summary.json``'s, e.g. ``E+L+I``; ``evolved``
+            when it names none), or ``designed``.
         run_arena: The arena the run evolved in ("" when unknown or hand-made).
         robot: The robot.
     """
 
     label: str
     origin: Origin
+    method: str
     run: str
     run_arena: str
     robot: Robot
@@ -159,7 +167,8 @@ def evolved_entrants(paths: Sequence[Path], limits: Limits) -> list[Entrant]:
             robot = load_robot(RunLayout(run_dir).robot(summary.best_robot), limits)
         except (RobotFileError, InvalidRobotError) as err:
             raise DesignerError(f"--runs: {err}") from None
-        entrants.append(Entrant(label, "evolved", str(run_dir), _run_arena(run_dir), robot))
+        entrants.append(Entrant(label, "evolved", summary.method or "evolved", str(run_dir),
+                                _run_arena(run_dir), robot))
     return entrants
 
 
@@ -187,7 +196,7 @@ def designed_entrants(folder: Path, limits: Limits) -> list[Entrant]:
     if not files:
         raise DesignerError(f"--robots {folder}: no robot files (*.json) in it")
     try:
-        return [Entrant(path.stem, "designed", "", "", load_robot(path, limits))
+        return [Entrant(path.stem, "designed", "designed", "", "", load_robot(path, limits))
                 for path in files]
     except (RobotFileError, InvalidRobotError) as err:
         raise DesignerError(f"--robots: {err}") from None
@@ -329,7 +338,8 @@ def collect(out: Path, entrants: Sequence[Entrant], seeds: range) -> pd.DataFram
                 continue
             ttt = summary.eval_time_to_target
             rows.append(dict(
-                robot=entrant.label, origin=entrant.origin, run=entrant.run,
+                robot=entrant.label, origin=entrant.origin, method=entrant.method,
+                run=entrant.run,
                 structure=entrant.robot.name, seed=seed, arena=summary.arena,
                 env_steps=summary.env_steps, fitness=summary.fitness,
                 success_rate=summary.success_rate, eval_mean_return=summary.eval_mean_return,
@@ -393,6 +403,8 @@ def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for (robot, origin), group in trainings.groupby(["robot", "origin"], sort=False):
         row: dict[str, object] = {"robot": robot, "origin": origin,
+                                  "method": group["method"].iloc[0]
+                                  if "method" in group else origin,  # an older table
                                   "run": group["run"].iloc[0],
                                   "structure": group["structure"].iloc[0],
                                   "seeds": len(group)}
@@ -412,6 +424,45 @@ def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
         return table
     return table.sort_values("eval_mean_return_mean", ascending=False, kind="stable",
                              ignore_index=True)
+
+
+def per_method(comparison: pd.DataFrame) -> pd.DataFrame:
+    """Per method (the GA runs' methods, and ``designed``), the mean over its robots of
+    each robot's mean over seeds, with a 95 % t-interval over robots: for the evolved
+    methods one robot per GA run, so the run is the unit (with and without inheritance
+    compared on the bodies their runs chose, each trained from scratch).
+
+    Returns:
+        One row per method: ``method``, ``robots``, and ``<metric>_mean/_low/_high``.
+    """
+    rows = []
+    for method, group in comparison.groupby("method", sort=False):
+        row: dict[str, object] = {"method": method, "robots": len(group)}
+        for metric in METRICS:
+            mean, low, high, _ = mean_ci(group[f"{metric}_mean"].to_numpy(dtype=float))
+            floor, ceiling = RANGES.get(metric, (-math.inf, math.inf))
+            row |= {f"{metric}_mean": mean, f"{metric}_low": max(low, floor),
+                    f"{metric}_high": min(high, ceiling)}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def method_differences(comparison: pd.DataFrame) -> pd.DataFrame:
+    """Every pair of evolved methods (``E+L+I`` − ``E+L``, ...): the difference of their
+    robots' means over seeds on each metric, with Welch's 95 % interval over robots (GA
+    runs). Empty with fewer than two evolved methods."""
+    evolved = comparison[comparison["origin"] == "evolved"]
+    methods = sorted(evolved["method"].unique(), key=lambda m: (len(m), m), reverse=True)
+    rows = []
+    for i, a in enumerate(methods):
+        for b in methods[i + 1:]:
+            for metric in METRICS:
+                diff, low, high = welch_difference(
+                    evolved.loc[evolved["method"] == a, f"{metric}_mean"].to_numpy(dtype=float),
+                    evolved.loc[evolved["method"] == b, f"{metric}_mean"].to_numpy(dtype=float))
+                rows.append(dict(pair=f"{a} − {b}", metric=metric, difference=diff, low=low,
+                                 high=high))
+    return pd.DataFrame(rows, columns=["pair", "metric", "difference", "low", "high"])
 
 
 def best_of(comparison: pd.DataFrame, origin: Origin) -> str | None:
@@ -517,6 +568,8 @@ def write_report(out: Path, report: Report) -> Report:
         rows.append(report.confirm_trainings.assign(confirmation=True))
     write_csv(out / TRAININGS, pd.concat(rows, ignore_index=True))
     write_csv(out / COMPARISON, report.comparison)
+    if not report.comparison.empty:
+        write_csv(out / PER_METHOD, per_method(report.comparison))
     if report.duel is not None:
         duels = [report.duel.assign(seeds="choice")]
         if report.confirmed_duel is not None:
@@ -641,6 +694,32 @@ def _per_robot_markdown(comparison: pd.DataFrame) -> pd.DataFrame:
     return shown
 
 
+def _per_method_markdown(comparison: pd.DataFrame) -> list[str]:
+    """The section on methods: each method's robots together, and the evolved methods'
+    differences; nothing without an evolved robot."""
+    if comparison.empty or not (comparison["origin"] == "evolved").any():
+        return []
+    methods = per_method(comparison)
+    shown = pd.DataFrame({"method": methods["method"], "robots": methods["robots"]})
+    for metric, title in (("success_rate", "success"), ("eval_mean_return", "eval return"),
+                          ("eval_time_to_target", "time to target (s)")):
+        shown[title] = [fmt_ci(r[f"{metric}_mean"], r[f"{metric}_low"], r[f"{metric}_high"])
+                        for _, r in methods.iterrows()]
+    lines = [
+        "## Per method (one robot per GA run: the run is the unit)\n",
+        "Each GA run's best robot, retrained from scratch: the mean over a method's robots "
+        "of each robot's mean over seeds, with a 95 % t-interval over robots. This judges "
+        "the bodies the runs chose, every one trained the same way, whatever the run's "
+        "robots started from (a run with inheritance included).\n",
+        markdown_table(shown),
+    ]
+    differences = method_differences(comparison)
+    if not differences.empty:
+        lines += ["Differences between the evolved methods (Welch 95 % intervals over "
+                  "robots):\n", markdown_table(differences)]
+    return lines
+
+
 def _markdown(report: Report, out: Path, figures: Sequence[Path] = ()) -> str:
     """``comparison.md``, linking the ``figures`` written into ``out``."""
     links = {path.name: path for path in figures}
@@ -663,6 +742,7 @@ def _markdown(report: Report, out: Path, figures: Sequence[Path] = ()) -> str:
         lines.append(figure_link(links[COMPARISON_FIGURE], out, "every robot's success rate, "
                                  "evaluation return and time to target with 95 % intervals; "
                                  "the chosen two ringed"))
+    lines += _per_method_markdown(report.comparison)
     lines.append("## Head to head\n")
     if CHOSEN_FIGURE in links:
         lines.append(figure_link(links[CHOSEN_FIGURE], out,

@@ -28,6 +28,8 @@ from analysis.designer import (
     folder_arena,
     main,
     mean_ci,
+    method_differences,
+    per_method,
     welch_difference,
     write_figures,
 )
@@ -96,6 +98,28 @@ def test_intervals_hold_their_estimate_and_degenerate_cases_say_so() -> None:
     row = comparison_table(pd.DataFrame(rows)).iloc[0]
     assert row["success_rate_high"] == 1.0 and row["eval_time_to_target_low"] == 0.0
     assert mean_ci([0.2, 1.0, 1.0])[2] > 1 and row["eval_mean_return_low"] < -1, "unclipped"
+
+
+def test_methods_are_compared_with_one_robot_per_run_as_the_unit() -> None:
+    def robot(label: str, method: str, returns: list[float]) -> list[dict[str, object]]:
+        origin = "designed" if method == "designed" else "evolved"
+        return [dict(robot=label, origin=origin, method=method, run="", structure="s",
+                     seed=seed, fitness=0.0, success_rate=1.0, eval_mean_return=value,
+                     eval_time_to_target=5.0, wall_seconds=1.0)
+                for seed, value in enumerate(returns)]
+    trainings = pd.DataFrame([
+        *robot("E+L_seed0", "E+L", [0.2, 0.4]), *robot("E+L_seed1", "E+L", [0.0, 0.2]),
+        *robot("E+L+I_seed0", "E+L+I", [0.9, 1.1]), *robot("E+L+I_seed1", "E+L+I", [0.7, 0.9]),
+        *robot("snake", "designed", [0.5, 0.5])])
+    comparison = comparison_table(trainings)
+    methods = per_method(comparison).set_index("method")
+    assert methods["robots"].to_dict() == {"E+L+I": 2, "E+L": 2, "designed": 1}
+    assert methods.loc["E+L", "eval_mean_return_mean"] == pytest.approx((0.3 + 0.1) / 2)
+    low, high = methods.loc["E+L", ["eval_mean_return_low", "eval_mean_return_high"]]
+    assert low < 0.2 < high, "an interval over the method's two robots (runs)"
+    pair = method_differences(comparison).set_index("metric").loc["eval_mean_return"]
+    assert pair["pair"] == "E+L+I − E+L" and pair["difference"] == pytest.approx(0.9 - 0.2)
+    assert pair["low"] < pair["difference"] < pair["high"]
 
 
 def test_the_figure_draws_every_robot_in_order_and_survives_missing_values() -> None:
@@ -182,6 +206,10 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
     origins = trainings.groupby("robot")["origin"].first().to_dict()
     assert origins == {"E+L_seed0": "evolved", "four_wheeler": "designed",
                        "twisted_four_wheeler": "designed"}
+    assert trainings.groupby("robot")["method"].first().to_dict() == {
+        "E+L_seed0": "E+L", "four_wheeler": "designed", "twisted_four_wheeler": "designed"}
+    methods = pd.read_csv(out / "per_method.csv").set_index("method")
+    assert methods["robots"].to_dict() == {"E+L": 1, "designed": 2}
     assert (trainings["arena"] == "cluttered").all() and (trainings["eval_episodes"] == 3).all()
     assert (trainings["env_steps"] >= 512).all() and trainings["success_rate"].between(0, 1).all()
     for row in trainings.itertuples():
