@@ -126,6 +126,10 @@ EXCLUDED: dict[str, str] = {
     "python -m analysis.inheritance runs/inheritance --out inheritance/":
         "needs the six runs of +exp=inheritance_laptop; tests/test_analysis_inheritance.py "
         "runs the tool on small run folders",
+    "python -m analysis.designer --runs outputs/ablation/<date>/E+L_seed* --out designer/ "
+    "--confirm 3": "trains every run's best robot and the four hand-made ones 3 times at 150k "
+                   "env steps (about an hour per arena on two cores); tests/test_designer.py "
+                   "runs the tool end to end on a tiny budget, resumed",
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",
