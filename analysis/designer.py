@@ -392,6 +392,14 @@ def welch_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nd
     return diff, float(ci.low), float(ci.high)
 
 
+def metric_ci(metric: str, values: np.ndarray) -> tuple[float, float, float, int]:
+    """:func:`mean_ci` of a metric's ``values``, its interval clipped to the metric's
+    :data:`RANGES` (a NaN bound stays NaN)."""
+    mean, low, high, n = mean_ci(values)
+    floor, ceiling = RANGES.get(metric, (-math.inf, math.inf))
+    return mean, max(low, floor), min(high, ceiling), n
+
+
 def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
     """Per robot, the mean over seeds with its 95 % t-interval (clipped to the metric's
     :data:`RANGES`) and the worst seed of each metric (:data:`METRICS`), best mean
@@ -409,10 +417,8 @@ def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
                                   "structure": group["structure"].iloc[0],
                                   "seeds": len(group)}
         for metric, better in METRICS.items():
-            mean, low, high, n = mean_ci(group[metric].to_numpy(dtype=float))
-            floor, ceiling = RANGES.get(metric, (-math.inf, math.inf))
-            low, high = max(low, floor), min(high, ceiling)  # NaN stays NaN
             values = group[metric].to_numpy(dtype=float)
+            mean, low, high, n = metric_ci(metric, values)
             worst = (np.nanmin if better == "higher" else np.nanmax)(values) if n else math.nan
             row |= {f"{metric}_mean": mean, f"{metric}_low": low, f"{metric}_high": high,
                     f"{metric}_worst": float(worst), f"{metric}_seeds": n}
@@ -439,10 +445,8 @@ def per_method(comparison: pd.DataFrame) -> pd.DataFrame:
     for method, group in comparison.groupby("method", sort=False):
         row: dict[str, object] = {"method": method, "robots": len(group)}
         for metric in METRICS:
-            mean, low, high, _ = mean_ci(group[f"{metric}_mean"].to_numpy(dtype=float))
-            floor, ceiling = RANGES.get(metric, (-math.inf, math.inf))
-            row |= {f"{metric}_mean": mean, f"{metric}_low": max(low, floor),
-                    f"{metric}_high": min(high, ceiling)}
+            mean, low, high, _ = metric_ci(metric, group[f"{metric}_mean"].to_numpy(dtype=float))
+            row |= {f"{metric}_mean": mean, f"{metric}_low": low, f"{metric}_high": high}
         rows.append(row)
     return pd.DataFrame(rows)
 
