@@ -355,6 +355,30 @@ def test_run_sh_starts_only_the_arms_asked_for_and_resumes_them(tmp_path: Path) 
     assert done.returncode == 2 and "ARENA: expected clean or cluttered, got 'rocky'" in done.stderr
 
 
+
+def test_run_sh_jobs_keeps_at_most_n_runs_going_and_runs_them_all(tmp_path: Path) -> None:
+    script = tmp_path / "docs" / "results" / "ablation" / "run.sh"
+    script.parent.mkdir(parents=True)
+    script.write_bytes((REPO / "docs" / "results" / "ablation" / "run.sh").read_bytes())
+    script.chmod(0o755)
+    going = tmp_path / "going"
+    going.mkdir()
+    # Stands in for the virtualenv's python: counts the runs going while it is one of them.
+    python = tmp_path / "python"
+    python.write_text(f'#!/usr/bin/env bash\ntouch {going}/$$\nls {going} | wc -l '
+                      f'>> {tmp_path}/counts\nsleep 0.3\nrm {going}/$$\n')
+    python.chmod(0o755)
+    env = {**os.environ, "PYTHON": str(python), "SEEDS": "5 6", "ARMS": "E+L E+R R+L",
+           "JOBS": "2"}
+    done = subprocess.run([str(script)], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    counts = [int(c) for c in (tmp_path / "counts").read_text().split()]
+    assert len(counts) == 6 and max(counts) <= 2  # six runs, never more than two at once
+    assert len(list((tmp_path / "runs").glob("ablation_*_seed[56].log"))) == 6
+    done = subprocess.run([str(script)], env={**env, "JOBS": "two"}, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and "JOBS: expected a whole number" in done.stderr
+
 # ---- older configs and shorthands ----------------------------------------------------------
 
 OLD_CONFIG = REPO / "tests" / "data" / "run_58aad82" / "stopped" / "config.yaml"

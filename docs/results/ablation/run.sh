@@ -9,10 +9,13 @@
 # runs/<name>/ (docs/results/ablation_100k/run.sh does, with the paper's four arms).
 # ARENA=cluttered evolves in the cluttered arena instead, into runs/<name>_cluttered/;
 # ROBOTS=N evaluates N robots per run instead of 100 (both only when a run starts: a
-# resumed run keeps its config). The evolved side of the designer comparison:
+# resumed run keeps its config). JOBS=N runs at most N at once (default: all; each
+# process holds about 0.6 GB). The evolved side of the designer comparison:
 #   ARENA=cluttered ROBOTS=60 ARMS="E+L E+L+I" SEEDS="0 1 2" docs/results/ablation/run.sh
 #   docs/results/ablation/run.sh                  # from the repository root
 #   ARMS="E+L+I" docs/results/ablation/run.sh     # only the fifth arm
+# GA seeds 5-12 of the paper's four arms at 60 robots per run (the power analysis's plan):
+#   SEEDS="5 6 7 8 9 10 11 12" ARMS="E+L E+R R+L R+R" ROBOTS=60 JOBS=4 docs/results/ablation/run.sh
 #   python -m analysis.report runs/ablation --out docs/results/ablation [--first 60]
 set -u
 cd "$(dirname "$0")/../../.."
@@ -25,6 +28,11 @@ case "$arena" in
   *) echo "ARENA: expected clean or cluttered, got '$arena'" >&2; exit 2 ;;
 esac
 if [ -n "${ROBOTS:-}" ]; then extra+=(ga.robot_budget="$ROBOTS"); fi
+jobs_at_once=${JOBS:-0}
+case "$jobs_at_once" in
+  ''|*[!0-9]*) echo "JOBS: expected a whole number of runs at once, got '$jobs_at_once'" >&2
+               exit 2 ;;
+esac
 arms=" ${ARMS:-E+L E+R R+L R+R E+L+I} "
 one() {
   local structure=$1 learner=$2 name=$3 seed=$4
@@ -64,6 +72,9 @@ for seed in ${SEEDS:-0 1 2 3 4}; do
   for spec in "${specs[@]}"; do
     read -r -a words <<< "$spec"
     case "$arms" in *" ${words[2]} "*) ;; *) continue ;; esac
+    if [ "$jobs_at_once" -gt 0 ]; then  # wait for a free place, in seed order
+      while [ "$(jobs -rp | wc -l)" -ge "$jobs_at_once" ]; do wait -n; done
+    fi
     one "${words[@]:0:3}" "$seed" "${words[@]:3}" &
   done
 done
