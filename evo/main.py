@@ -7,7 +7,8 @@ here and nothing below sees a ``DictConfig``. Outputs go only to the run directo
 Tasks (``task=``):
 
 * ``evolve`` (the default): the GA of ``conf/ga``, evaluations on ``conf/executor``;
-  ``resume=<run dir>`` continues a stopped run in its own directory;
+  ``resume=<run dir>`` continues a stopped run in its own directory, to another robot
+  budget with ``ga.robot_budget=N`` (:func:`with_robot_budget`);
 * ``robots``: generate, save and picture random robots;
 * ``train``: train one robot (``robot=FILE``) and evaluate it deterministically;
 * ``evaluate``: run a trained policy (``robot=FILE checkpoint=FILE``);
@@ -24,6 +25,7 @@ its own (a store that fails at a chosen write, in the fault tests) passes an
 
 from __future__ import annotations
 
+import copy
 import functools
 import logging
 import os
@@ -211,22 +213,31 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
     """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues.
 
     Everything is checked before anything is written: the config, and when the
-    directory holds a run, its saved state (:meth:`evo.run.store.RunStore.load`). A
+    directory holds a run, its saved state (:meth:`evo.run.store.RunStore.load`) and a
+    new ``ga.robot_budget`` given with ``resume=`` (:func:`with_robot_budget`). A
     resume that fails leaves the directory as it was. ``code`` makes the store, the
     run's log and the evaluations.
     """
     from evo.progress import evolution_progress, print_summary
 
     resuming = cfg.resume is not None
+    given = cfg
     if resuming:
-        cfg = _resumed_config(Path(str(cfg.resume)))
+        cfg = _resumed_config(Path(str(cfg.resume)), takes=(ROBOT_BUDGET,))
         check_seed(cfg)
-    parts = evolve_parts(cfg, out)
     store = code.store(out)
     saved = _state_to_continue(store, resuming)
+    started = cfg
+    if resuming and _given(ROBOT_BUDGET):
+        cfg = with_robot_budget(cfg, given.ga.robot_budget, saved)
+    parts = evolve_parts(cfg, out)
     parts = keeping_its_method(parts, saved)
     if resuming:
         lock.claim()
+        if cfg.ga.robot_budget != started.ga.robot_budget:
+            _write_config(cfg, out, replacing=True)
+            print(f"{out}: {ROBOT_BUDGET} changed from {started.ga.robot_budget} to "
+                  f"{cfg.ga.robot_budget} robots")
     budgets = parts.ga.expected_budgets()
     log: RunLog | None = None
     evolution: Evolution | None = None
@@ -296,6 +307,41 @@ def _saved_state(store: RunStore) -> SavedState:
         raise ConfigError(f"resume: {err}") from None
 
 
+def with_robot_budget(cfg: DictConfig, robot_budget: object,
+                      saved: SavedState | None) -> DictConfig:
+    """``cfg`` (a resumed run's) with ``ga.robot_budget`` set to ``robot_budget``
+    (``resume=DIR ga.robot_budget=N``): the run ends at N robots, before or after the
+    end it was started with; at the robots already born, it ends at once.
+
+    Raises:
+        ConfigError: N is not a valid ``ga.robot_budget`` (:class:`GAConfig`), is below
+            the robots already born (evaluated or in flight, ``saved``), or would give
+            one of them another training budget: ``ga.schedule`` may depend on
+            ``ga.robot_budget``, and the robots of one run are those of a run of N.
+    """
+    new = copy.deepcopy(cfg)
+    new.ga.robot_budget = robot_budget
+    old, ga = typed(GAConfig, cfg.ga, "ga"), typed(GAConfig, new.ga, "ga")
+    born = saved.next_birth if saved is not None else 0
+    if ga.robot_budget < born:
+        raise ConfigError(
+            f"{ROBOT_BUDGET}: the run has {born} robots already (evaluated or in flight), "
+            f"which it cannot un-evaluate; expected at least {born}, got {ga.robot_budget}")
+    was, now = old.budgets()[:born], ga.budgets()[:born]
+    changed = [b for b in range(born) if was[b] != now[b]]
+    if changed:
+        b = changed[0]
+        raise ConfigError(
+            f"{ROBOT_BUDGET}: ga.schedule (initial {ga.schedule.initial}, first "
+            f"{ga.schedule.first}, last {ga.schedule.last}) depends on {ROBOT_BUDGET}, so "
+            f"{ga.robot_budget} instead of {old.robot_budget} would give robot {b}, already "
+            f"born, {now[b]} env steps instead of {was[b]} ({len(changed)} of the {born} "
+            f"born would change): the robots evaluated and those to come would not be one "
+            f"run of {ga.robot_budget} robots; keep {ROBOT_BUDGET}={old.robot_budget} (a "
+            f"schedule with first = last takes any)")
+    return new
+
+
 def check_seed(cfg: DictConfig) -> int:
     """The root seed: a non-negative integer (numpy's seed sequences take no other)."""
     seed = cfg.seed
@@ -304,16 +350,29 @@ def check_seed(cfg: DictConfig) -> int:
     return seed
 
 
-def _resumed_config(run_dir: Path) -> DictConfig:
+ROBOT_BUDGET = "ga.robot_budget"
+"""The one key ``resume=DIR`` of ``task=evolve`` takes a new value of
+(:func:`with_robot_budget`): a run stops early for good, or goes on past its end."""
+
+
+def _given(key: str) -> bool:
+    """Whether the command line sets ``key`` (``key=value``)."""
+    return any(o.partition("=")[0] == key for o in HydraConfig.get().overrides.task)
+
+
+def _resumed_config(run_dir: Path, takes: tuple[str, ...] = ()) -> DictConfig:
     """The resolved config a run directory was started with, in today's form
-    (:func:`evo.config.current`: a run of an older evo resumes)."""
+    (:func:`evo.config.current`: a run of an older evo resumes). The command line may
+    set only the keys in ``takes`` besides ``resume=``; the caller applies them."""
     path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
-    extra = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+    extra = [o for o in HydraConfig.get().overrides.task
+             if not o.startswith("resume=") and o.partition("=")[0] not in takes]
     if extra:
+        but = "".join(f" but for {key}=..." for key in takes)
         raise ConfigError(
-            f"resume: a resumed run keeps the config it was started with ({path}); "
+            f"resume: a resumed run keeps the config it was started with ({path}){but}; "
             f"drop the other overrides: {' '.join(extra)}"
         )
     loaded = OmegaConf.load(path)
@@ -322,18 +381,22 @@ def _resumed_config(run_dir: Path) -> DictConfig:
     return current(loaded)
 
 
-def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None) -> None:
+def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None, *,
+                  replacing: bool = False) -> None:
     """Save the resolved config in the run directory (after ``lock.claim()``).
 
     A directory that already holds an evolution state (the same command run again, e.g.
     a requeued cluster job or a stopped sweep started again with the same
     ``hydra.sweep.dir``) is continued only when the config is the same; anything else
     would mix two runs in one directory, and is refused before anything is written.
+    ``replacing`` writes over it: the config of a resumed run, changed as ``resume=``
+    allows (:func:`with_robot_budget`).
     """
     text = OmegaConf.to_yaml(cfg, resolve=True)
     layout = RunLayout(out)
     path = layout.config
-    if layout.state.exists() and path.is_file() and path.read_text() != text:
+    if (not replacing and layout.state.exists() and path.is_file()
+            and path.read_text() != text):
         raise ConfigError(
             f"hydra.run.dir: {out} already holds a run with another config; continue it "
             f"with resume={out}, or choose a new output directory"

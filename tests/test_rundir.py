@@ -12,7 +12,10 @@ End to end through ``python evo/main.py`` in subprocesses with real (tiny) train
   cleanup no signal reaches;
 * a full disk at each kind of write (state, history, robot file, policy, MCAP and rerun
   recordings) stops the run with one line and exit 1, and the resumed run is the
-  uninterrupted one.
+  uninterrupted one;
+* ``resume=DIR ga.robot_budget=N`` ends a run early or extends a finished one (the run of
+  N robots), and refuses an N below the robots born or one the schedule would give them
+  other budgets under.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pytest
 from omegaconf import OmegaConf
@@ -39,17 +43,18 @@ from test_evolution import (
     TINY,
     check_run_dir,
     comparable,
+    killed,
     main_cmd,
     read_history,
     run,
 )
 
 from evo.config import ConfigError
-from evo.main import _state_to_continue, check_seed
+from evo.main import _state_to_continue, check_seed, with_robot_budget
 from evo.record import mcap_file, rrd
 from evo.robot.tree import Robot
 from evo.run.files import RunDirectoryBusy, RunLock, is_locked
-from evo.run.store import RunStore
+from evo.run.store import RunStore, SavedState, rng_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from kill_resume import kill_and_resume, unreadable_files  # noqa: E402
@@ -549,3 +554,125 @@ def test_a_full_disk_at_each_kind_of_write_stops_the_run_and_resume_completes_it
     print("\nkind     exit  message\n" + "\n".join(f"{k:8} {c:4}  {m}" for k, c, m in matrix)
           + f"\nresumed with room: exit {done.returncode}, history identical: {identical}")
     pd.testing.assert_frame_equal(comparable(history), reference)
+
+
+# ---- another robot budget on resume --------------------------------------------------------
+
+
+def tiny(**values: object) -> list[str]:
+    """TINY with some of its values replaced (``tiny(**{"ga.robot_budget": 4})``)."""
+    return [f"{key}={values[key]}" if key in values else arg
+            for arg in TINY for key in [arg.partition("=")[0]]]
+
+
+FIXED = {"ga.schedule.last": 256}
+"""TINY's schedule with first = last: every offspring's budget is the same whatever the
+robot budget, so a run may stop earlier or go on."""
+
+
+@pytest.fixture(scope="module")
+def fixed_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A finished tiny serial run of 6 robots at the :data:`FIXED` schedule."""
+    run_dir = tmp_path_factory.mktemp("fixed") / "run"
+    done = run(main_cmd(*tiny(**FIXED), "executor=serial", f"hydra.run.dir={run_dir}"),
+               run_dir.parent)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return run_dir
+
+
+def robot_budget_in(run_dir: Path) -> int:
+    return int(OmegaConf.load(run_dir / "config.yaml").ga.robot_budget)
+
+
+@pytest.mark.slow
+def test_a_larger_robot_budget_extends_a_finished_run_to_the_run_of_that_many(
+    fixed_reference: Path, tmp_path: Path
+) -> None:
+    run_dir = tmp_path / "run"
+    short = tiny(**FIXED, **{"ga.robot_budget": 4})
+    done = run(main_cmd(*short, "executor=serial", f"hydra.run.dir={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    first = check_run_dir(run_dir, robot_budget=4)
+    done = run(main_cmd(f"resume={run_dir}", "ga.robot_budget=6"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert f"{run_dir}: ga.robot_budget changed from 4 to 6 robots" in done.stdout, done.stdout
+    history = check_run_dir(run_dir, robot_budget=6)  # summary.json: complete
+    assert robot_budget_in(run_dir) == 6
+    assert json.loads((run_dir / "summary.json").read_text())["robot_budget"] == 6
+    pd.testing.assert_frame_equal(comparable(history).head(4), comparable(first))
+    pd.testing.assert_frame_equal(comparable(history),
+                                  comparable(read_history(fixed_reference)))
+
+
+@pytest.mark.slow
+def test_a_robot_budget_at_the_robots_done_ends_a_stopped_run_at_once(
+    fixed_reference: Path, tmp_path: Path
+) -> None:
+    run_dir = tmp_path / "run"
+    killed("after-final-state", 4, *tiny(**FIXED), "executor=serial",
+           f"hydra.run.dir={run_dir}", cwd=tmp_path)
+    assert len(RunStore(run_dir).load().history) == 4 and robot_budget_in(run_dir) == 6
+    done = run(main_cmd(f"resume={run_dir}", "ga.robot_budget=4"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "ga.robot_budget changed from 6 to 4 robots" in done.stdout, done.stdout
+    history = check_run_dir(run_dir, robot_budget=4)  # no new robot; complete
+    assert robot_budget_in(run_dir) == 4
+    reference = comparable(read_history(fixed_reference))
+    pd.testing.assert_frame_equal(comparable(history), reference.head(4))
+
+
+@pytest.mark.slow
+def test_a_robot_budget_a_resume_cannot_take_is_refused_and_changes_nothing(
+    serial_reference: Path, tmp_path: Path
+) -> None:
+    # serial_reference: 6 robots done, population 3, schedule 256 rising to 768. One
+    # copy per case: the resumes run at once.
+    cases = [
+        (["ga.robot_budget=5"], "ga.robot_budget: the run has 6 robots already (evaluated "
+         "or in flight), which it cannot un-evaluate; expected at least 6, got 5"),
+        (["ga.robot_budget=2"], "ga: robot_budget (2) must be >= population_size (3)"),
+        (["ga.robot_budget=8"], "ga.robot_budget: ga.schedule (initial 256, first 256, "
+         "last 768) depends on ga.robot_budget, so 8 instead of 6 would give robot 4"),
+        (["ga.robot_budget=8", "executor=local"], "resume: a resumed run keeps the config it "
+         "was started with ({}) but for ga.robot_budget=...; drop the other overrides: "
+         "executor=local"),
+    ]
+    run_dirs = [shutil.copytree(serial_reference, tmp_path / f"run{i}")
+                for i in range(len(cases))]
+    before = tree_hash(run_dirs[0])
+    procs = [subprocess.Popen(main_cmd(f"resume={d}", *args), cwd=tmp_path, env=ENV,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+             for d, (args, _) in zip(run_dirs, cases, strict=True)]
+    for d, (args, expected), proc in zip(run_dirs, cases, procs, strict=True):
+        _, err = proc.communicate(timeout=180)
+        assert proc.returncode == 2, (args, proc.returncode, err[-2000:])
+        expected = expected.format(d / "config.yaml")
+        assert f"error: bad config: {expected}" in err and "Traceback" not in err, (args, err)
+        assert tree_hash(d) == before, f"{args}: a refused resume changed the run directory"
+
+
+def saved_with(born: int) -> SavedState:
+    """A saved state with ``born`` robots born (the count ``with_robot_budget`` reads)."""
+    return SavedState(0, born, rng_state(np.random.default_rng(0)), [], [], [], 0.0)
+
+
+def test_another_robot_budget_must_keep_the_budgets_of_the_robots_born() -> None:
+    rising = OmegaConf.create({"ga": {"population_size": 3, "robot_budget": 6, "schedule": {
+        "initial": 100, "first": 200, "last": 400}}})
+    # Only initial robots born: any N; robot 3 too: 200 steps at 6 robots and at 8.
+    for born, n in ((3, 4), (3, 60), (0, 3), (4, 8)):
+        assert with_robot_budget(rising, n, saved_with(born)).ga.robot_budget == n
+    assert rising.ga.robot_budget == 6, "the config given is left alone"
+    for born, n, message in (
+        (5, 8, "would give robot 4, already born, 250 env steps instead of 300 (1 of the 5"),
+        (5, 5, "would give robot 4, already born, 400 env steps instead of 300 (1 of the 5"),
+        (4, 4, "would give robot 3, already born, 400 env steps instead of 200 (1 of the 4"),
+        (5, 4, "expected at least 5, got 4"),
+        (3, "six", "ga.robot_budget: expected an integer, got 'six'"),
+    ):
+        with pytest.raises(ConfigError, match=re.escape(message)):
+            with_robot_budget(rising, n, saved_with(born))
+    fixed = OmegaConf.create({"ga": {"population_size": 3, "robot_budget": 6, "schedule": {
+        "initial": 100, "first": 300, "last": 300}}})
+    for born, n in ((4, 4), (6, 6), (6, 600)):  # first = last: any N from the robots born
+        assert with_robot_budget(fixed, n, saved_with(born)).ga.robot_budget == n
