@@ -230,6 +230,12 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
     started = cfg
     if resuming and _given(ROBOT_BUDGET):
         cfg = with_robot_budget(cfg, given.ga.robot_budget, saved)
+    dropped: list[Candidate] = []
+    if saved is not None:
+        try:
+            saved, dropped = saved.ending_at(int(cfg.ga.robot_budget))
+        except ValueError as err:
+            raise ConfigError(f"{RunLayout(out).state}: {err}") from None
     parts = evolve_parts(cfg, out)
     parts = keeping_its_method(parts, saved)
     if resuming:
@@ -257,7 +263,12 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
                                   executor=parts.executor, seed=int(cfg.seed),
                                   on_result=on_result, evaluate=code.evaluate)
             if saved is not None:
-                evolution.resume(saved)
+                evolution.resume(saved)  # saved: the state without the robots dropped
+                for candidate in dropped:
+                    store.discard(candidate.name)
+                    print(f"{out}: robot {candidate.name} (birth {candidate.birth}), in "
+                          f"flight, dropped: a run of {cfg.ga.robot_budget} robots does "
+                          f"not breed it")
                 show.resumed(evolution.history)
                 for row in evolution.history:
                     log(row)
@@ -311,31 +322,36 @@ def with_robot_budget(cfg: DictConfig, robot_budget: object,
                       saved: SavedState | None) -> DictConfig:
     """``cfg`` (a resumed run's) with ``ga.robot_budget`` set to ``robot_budget``
     (``resume=DIR ga.robot_budget=N``): the run ends at N robots, before or after the
-    end it was started with; at the robots already born, it ends at once.
+    end it was started with; at the robots already evaluated, it ends at once, and the
+    robots in flight born at N or later are dropped (:meth:`SavedState.ending_at`).
 
     Raises:
-        ConfigError: N is not a valid ``ga.robot_budget`` (:class:`GAConfig`), is below
-            the robots already born (evaluated or in flight, ``saved``), or would give
-            one of them another training budget: ``ga.schedule`` may depend on
-            ``ga.robot_budget``, and the robots of one run are those of a run of N.
+        ConfigError: N is not a valid ``ga.robot_budget`` (:class:`GAConfig`), is not
+            above the birth of every robot already evaluated (``saved``), or would give
+            one of the robots it keeps another training budget: ``ga.schedule`` may
+            depend on ``ga.robot_budget``, and the robots of one run are those of a run
+            of N.
     """
     new = copy.deepcopy(cfg)
     new.ga.robot_budget = robot_budget
     old, ga = typed(GAConfig, cfg.ga, "ga"), typed(GAConfig, new.ga, "ga")
-    born = saved.next_birth if saved is not None else 0
-    if ga.robot_budget < born:
+    history = saved.history if saved is not None else []
+    evaluated = max((row.birth for row in history), default=-1) + 1
+    if ga.robot_budget < evaluated:
         raise ConfigError(
-            f"{ROBOT_BUDGET}: the run has {born} robots already (evaluated or in flight), "
-            f"which it cannot un-evaluate; expected at least {born}, got {ga.robot_budget}")
-    was, now = old.budgets()[:born], ga.budgets()[:born]
-    changed = [b for b in range(born) if was[b] != now[b]]
+            f"{ROBOT_BUDGET}: the run has evaluated robots up to birth {evaluated - 1}, "
+            f"which it cannot un-evaluate; expected at least {evaluated}, got "
+            f"{ga.robot_budget}")
+    kept = min(saved.next_birth if saved is not None else 0, ga.robot_budget)
+    was, now = old.budgets()[:kept], ga.budgets()[:kept]
+    changed = [b for b in range(kept) if was[b] != now[b]]
     if changed:
         b = changed[0]
         raise ConfigError(
             f"{ROBOT_BUDGET}: ga.schedule (initial {ga.schedule.initial}, first "
             f"{ga.schedule.first}, last {ga.schedule.last}) depends on {ROBOT_BUDGET}, so "
             f"{ga.robot_budget} instead of {old.robot_budget} would give robot {b}, already "
-            f"born, {now[b]} env steps instead of {was[b]} ({len(changed)} of the {born} "
+            f"born, {now[b]} env steps instead of {was[b]} ({len(changed)} of the {kept} "
             f"born would change): the robots evaluated and those to come would not be one "
             f"run of {ga.robot_budget} robots; keep {ROBOT_BUDGET}={old.robot_budget} (a "
             f"schedule with first = last takes any)")

@@ -50,10 +50,12 @@ from test_evolution import (
 )
 
 from evo.config import ConfigError
+from evo.evaluation import Candidate
 from evo.main import _state_to_continue, check_seed, with_robot_budget
 from evo.record import mcap_file, rrd
 from evo.robot.tree import Robot
 from evo.run.files import RunDirectoryBusy, RunLock, is_locked
+from evo.run.records import HistoryRow
 from evo.run.store import RunStore, SavedState, rng_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -622,14 +624,50 @@ def test_a_robot_budget_at_the_robots_done_ends_a_stopped_run_at_once(
 
 
 @pytest.mark.slow
+def test_a_robot_budget_below_a_robot_in_flight_drops_it_and_ends_at_once(
+    fixed_reference: Path, tmp_path: Path
+) -> None:
+    # Killed as robot 5 (birth 4) ends its training: 4 evaluated, the fifth in flight.
+    run_dir = tmp_path / "run"
+    killed("checkpoint", 5, *tiny(**FIXED), "executor=serial", f"hydra.run.dir={run_dir}",
+           cwd=tmp_path)
+    saved = RunStore(run_dir).load()
+    assert len(saved.history) == 4 and [t.birth for t in saved.pending] == [4]
+    flying = saved.pending[0].name
+    assert (run_dir / "evals" / f"{flying}.csv").is_file(), "its training wrote nothing"
+    done = run(main_cmd(f"resume={run_dir}", "ga.robot_budget=4"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (f"robot {flying} (birth 4), in flight, dropped: a run of 4 robots does not "
+            f"breed it") in done.stdout, done.stdout
+    history = check_run_dir(run_dir, robot_budget=4)  # robots/ holds the history's only
+    assert not list((run_dir / "evals").glob(f"{flying}.*")), "its evaluation's files stay"
+    reference = comparable(read_history(fixed_reference))
+    pd.testing.assert_frame_equal(comparable(history), reference.head(4))
+    again = run(main_cmd(f"resume={run_dir}"), tmp_path)  # complete: nothing to do
+    assert again.returncode == 0 and "dropped" not in again.stdout, again.stdout
+
+
+def test_a_state_ends_at_a_robot_budget_by_dropping_the_robots_in_flight_past_it() -> None:
+    saved = saved_with(7, in_flight=3)  # 0-3 evaluated, 4-6 in flight
+    assert saved.ending_at(7) == (saved, []) and saved.ending_at(60) == (saved, [])
+    ended, dropped = saved.ending_at(5)
+    assert [t.birth for t in dropped] == [5, 6] and [t.birth for t in ended.pending] == [4]
+    assert ended.next_birth == 5 and ended.history == saved.history
+    assert saved.ending_at(4)[0].next_birth == 4 and saved.ending_at(4)[0].pending == []
+    with pytest.raises(ValueError, match=re.escape("robots ['robot-3'] are evaluated and "
+                                                   "born at 3 or later")):
+        saved.ending_at(3)
+
+
+@pytest.mark.slow
 def test_a_robot_budget_a_resume_cannot_take_is_refused_and_changes_nothing(
     serial_reference: Path, tmp_path: Path
 ) -> None:
     # serial_reference: 6 robots done, population 3, schedule 256 rising to 768. One
     # copy per case: the resumes run at once.
     cases = [
-        (["ga.robot_budget=5"], "ga.robot_budget: the run has 6 robots already (evaluated "
-         "or in flight), which it cannot un-evaluate; expected at least 6, got 5"),
+        (["ga.robot_budget=5"], "ga.robot_budget: the run has evaluated robots up to birth "
+         "5, which it cannot un-evaluate; expected at least 6, got 5"),
         (["ga.robot_budget=2"], "ga: robot_budget (2) must be >= population_size (3)"),
         (["ga.robot_budget=8"], "ga.robot_budget: ga.schedule (initial 256, first 256, "
          "last 768) depends on ga.robot_budget, so 8 instead of 6 would give robot 4"),
@@ -651,9 +689,14 @@ def test_a_robot_budget_a_resume_cannot_take_is_refused_and_changes_nothing(
         assert tree_hash(d) == before, f"{args}: a refused resume changed the run directory"
 
 
-def saved_with(born: int) -> SavedState:
-    """A saved state with ``born`` robots born (the count ``with_robot_budget`` reads)."""
-    return SavedState(0, born, rng_state(np.random.default_rng(0)), [], [], [], 0.0)
+def saved_with(born: int, in_flight: int = 0) -> SavedState:
+    """A saved state with ``born`` robots born, the last ``in_flight`` of them in flight
+    (the births ``with_robot_budget`` and ``SavedState.ending_at`` read)."""
+    done = born - in_flight
+    rows = [HistoryRow(b, f"robot-{b}", "E+L", (), "random", 1, 1, -1.0, True, "", 1, 1, 0.0,
+                       "", -1.0, -1.0, "trained", float("nan")) for b in range(done)]
+    flying = [Candidate(b, f"robot-{b}", "{}", 1, b) for b in range(done, born)]
+    return SavedState(0, born, rng_state(np.random.default_rng(0)), [], rows, flying, 0.0)
 
 
 def test_another_robot_budget_must_keep_the_budgets_of_the_robots_born() -> None:
@@ -663,11 +706,15 @@ def test_another_robot_budget_must_keep_the_budgets_of_the_robots_born() -> None
     for born, n in ((3, 4), (3, 60), (0, 3), (4, 8)):
         assert with_robot_budget(rising, n, saved_with(born)).ga.robot_budget == n
     assert rising.ga.robot_budget == 6, "the config given is left alone"
+    # Robots 3-4 in flight at N = 3 are dropped: robot 3 would have another budget, but
+    # the robots kept (0-2, initial) keep theirs.
+    assert with_robot_budget(rising, 3, saved_with(5, in_flight=2)).ga.robot_budget == 3
     for born, n, message in (
         (5, 8, "would give robot 4, already born, 250 env steps instead of 300 (1 of the 5"),
         (5, 5, "would give robot 4, already born, 400 env steps instead of 300 (1 of the 5"),
         (4, 4, "would give robot 3, already born, 400 env steps instead of 200 (1 of the 4"),
-        (5, 4, "expected at least 5, got 4"),
+        (5, 4, "evaluated robots up to birth 4, which it cannot un-evaluate; expected at "
+               "least 5, got 4"),
         (3, "six", "ga.robot_budget: expected an integer, got 'six'"),
     ):
         with pytest.raises(ConfigError, match=re.escape(message)):

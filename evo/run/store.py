@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, TypedDict, cast
 
@@ -75,6 +75,27 @@ class SavedState:
     pending: list[Candidate]
     wall_seconds: float
 
+    def ending_at(self, robot_budget: int) -> tuple[SavedState, list[Candidate]]:
+        """This state for a run of ``robot_budget`` robots, and the robots in flight it
+        drops: those born at ``robot_budget`` or later, which a run of that many never
+        breeds (a run stopped after its N-th result, with robot N+1 in flight, then
+        resumed with ``ga.robot_budget=N``). The breeding generator stays where it is:
+        extended again later, the run breeds its robots from N on with other draws than
+        a straight run would.
+
+        Raises:
+            ValueError: A robot born at ``robot_budget`` or later is evaluated already.
+        """
+        past = [r.name for r in self.history if r.birth >= robot_budget]
+        if past:
+            raise ValueError(f"robots {past} are evaluated and born at {robot_budget} or "
+                             f"later: a run of {robot_budget} robots cannot hold them")
+        dropped = [t for t in self.pending if t.birth >= robot_budget]
+        if not dropped:
+            return self, []
+        kept = [t for t in self.pending if t.birth < robot_budget]
+        return replace(self, next_birth=robot_budget, pending=kept), dropped
+
 
 class RunStore:
     """The files of one evolution run directory (``evo.run.layout.RunLayout``)."""
@@ -96,6 +117,18 @@ class RunStore:
         """Write ``robots/<name>.json`` (atomically; a failure is ``files.WriteFailed``)."""
         with files.writing(self.layout.robot(name)) as path:
             return save_robot(robot, path)
+
+    def discard(self, name: str) -> list[Path]:
+        """Remove a robot that the saved state no longer holds (dropped from flight:
+        :meth:`SavedState.ending_at`): its ``robots/<name>.json`` and whatever its
+        evaluation had written to ``evals/``; returns the files removed."""
+        layout = self.layout
+        paths = (layout.robot(name), layout.policy(name), layout.curve(name),
+                 layout.mcap(name), layout.rrd(name), layout.error_log(name))
+        removed = [path for path in paths if path.exists()]
+        for path in removed:
+            path.unlink()
+        return removed
 
     def load_robot(self, name: str) -> Robot:
         """Read ``robots/<name>.json``.
