@@ -230,14 +230,8 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
     started = cfg
     if resuming and _given(ROBOT_BUDGET):
         cfg = with_robot_budget(cfg, given.ga.robot_budget, saved)
-    dropped: list[Candidate] = []
-    if saved is not None:
-        try:
-            saved, dropped = saved.ending_at(int(cfg.ga.robot_budget))
-        except ValueError as err:
-            raise ConfigError(f"{RunLayout(out).state}: {err}") from None
-    parts = evolve_parts(cfg, out)
-    parts = keeping_its_method(parts, saved)
+    saved, dropped = _ending_at_budget(saved, cfg, out)
+    parts = keeping_its_method(evolve_parts(cfg, out), saved)
     if resuming:
         lock.claim()
         if cfg.ga.robot_budget != started.ga.robot_budget:
@@ -264,11 +258,7 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
                                   on_result=on_result, evaluate=code.evaluate)
             if saved is not None:
                 evolution.resume(saved)  # saved: the state without the robots dropped
-                for candidate in dropped:
-                    store.discard(candidate.name)
-                    print(f"{out}: robot {candidate.name} (birth {candidate.birth}), in "
-                          f"flight, dropped: a run of {cfg.ga.robot_budget} robots does "
-                          f"not breed it")
+                _discard(store, dropped, int(cfg.ga.robot_budget))
                 show.resumed(evolution.history)
                 for row in evolution.history:
                     log(row)
@@ -279,6 +269,27 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
             log.close(history, parts.job.physics,
                       summary=evolution.summary() if evolution is not None else None)
     print_summary(summary, out)
+
+
+def _ending_at_budget(saved: SavedState | None, cfg: DictConfig, out: Path
+                      ) -> tuple[SavedState | None, list[Candidate]]:
+    """``saved`` for a run of ``cfg.ga.robot_budget`` robots, and the robots in flight it
+    drops (:meth:`SavedState.ending_at`); a clear ``ConfigError`` if it cannot be one."""
+    if saved is None:
+        return None, []
+    try:
+        return saved.ending_at(int(cfg.ga.robot_budget))
+    except ValueError as err:
+        raise ConfigError(f"{RunLayout(out).state}: {err}") from None
+
+
+def _discard(store: RunStore, dropped: list[Candidate], robot_budget: int) -> None:
+    """Remove the files of the robots in flight a resume dropped, naming each; called once
+    the state without them is saved."""
+    for candidate in dropped:
+        store.discard(candidate.name)
+        print(f"{store.root}: robot {candidate.name} (birth {candidate.birth}), in flight, "
+              f"dropped: a run of {robot_budget} robots does not breed it")
 
 
 def keeping_its_method(parts: EvolveParts, saved: SavedState | None) -> EvolveParts:
