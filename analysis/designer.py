@@ -1,34 +1,32 @@
 """Evolution against the designer: the best evolved robots and the hand-made ones, each
 retrained from scratch under the same protocol, compared head to head.
 
-    python -m analysis.designer --runs RUN [RUN ...] --out DIR [--robots robots/]
-        [--seeds 3] [--confirm 3] [--budget 150000] [--arena clean|cluttered] [--jobs 1]
-        [overrides...]
+The trainings are evo's (``evo.retrain``, ``+exp=designer``): each GA run's best robot
+and every hand-made robot trained as ``python evo/main.py +exp=train robot=FILE seed=S``
+trains it, with seeds ``0 .. seeds-1``, each training then evaluated deterministically
+(``learner.eval_episodes`` episodes of the policy's mean action): its success rate,
+mean return and mean time to target (simulated seconds, over the episodes that reached
+it). This module reads the folder and compares:
 
-    python -m analysis.designer --runs runs/ablation --out runs/designer --arena clean
+    python evo/main.py +exp=designer 'retrain.runs=[runs/ablation]' env=clean \
+        hydra.run.dir=runs/designer                 # the trainings (evo)
+    python -m analysis.designer runs/designer       # the comparison
 
-``--runs`` takes GA run directories or folders holding them (a Hydra multirun folder);
-each run's best robot (``summary.json``'s ``best_robot``) enters under the run's name
-(``E+L_seed0``). Every robot file of ``--robots`` (default ``robots/``) enters under
-its file name (``four_wheeler``). Each robot is trained with seeds ``0 .. seeds-1``
-exactly as ``python evo/main.py +exp=train robot=FILE seed=S [overrides...]`` trains it
-(the same config, composed with Hydra's compose API, and the same code:
-``evo.learners.session.train_robot``), then evaluated deterministically
-(``learner.eval_episodes`` episodes): its success rate, mean return and mean time to
-target (simulated seconds, over the episodes that reached it). ``--budget`` and
-``--arena`` are short for ``learner.total_steps=`` and ``env=``; any other override
-goes as it would to ``evo/main.py`` (``learner.eval_episodes=50``). Without ``--arena``
-(or ``env=``) the robots train in the arena the GA runs evolved in (their
-``config.yaml``), when they all agree; else in the config's (clean).
+``python -m analysis.designer --runs RUN [RUN ...] --out DIR [--robots robots/]
+[--seeds 3] [--confirm 3] [--budget 150000] [--arena clean|cluttered] [--jobs 1]
+[overrides...]`` is the older one-shot command: it runs ``+exp=designer`` into ``--out``
+(``--runs`` its ``retrain.runs``, ``--robots`` ``retrain.robots``, ``--seeds`` and
+``--confirm`` theirs, ``--budget`` and ``--arena`` short for ``learner.total_steps=`` and
+``env=``, ``--jobs`` the executor's workers; any other override goes as it would to
+``evo/main.py``), then writes the comparison. Without ``--arena`` (or ``env=``) the
+robots train in the arena the GA runs evolved in (their ``config.yaml``), when they all
+agree; else in the config's (clean). ``--runs`` takes GA run directories or folders
+holding them; each run's best robot enters under the run's name (``E+L_seed0``), every
+robot file of ``--robots`` under its file name (``four_wheeler``).
 
-Into ``--out``:
+Into the folder (beside the retraining's ``trainings.csv``, one row per training,
+``confirmation`` true for the confirmation's, ``robots/`` and ``evals/``):
 
-* ``trainings/<robot>_seed<s>/``: one ``+exp=train`` run directory per training
-  (``summary.json``, ``policy.pt``, ``curve.csv``, ``robot.json``);
-* ``robots/<robot>.json``: the robots compared; ``settings.json``: the overrides and
-  the resolved config;
-* ``trainings.csv``: one row per finished training (``confirmation`` true for the
-  trainings of ``--confirm``);
 * ``comparison.csv``: per robot, the mean over seeds with a 95 % t-interval, and the
   worst seed, of each metric;
 * ``per_method.csv``: per method (each GA run's method, ``designed`` for the hand-made
@@ -41,30 +39,24 @@ Into ``--out``:
   chosen ringed; ``chosen.png``: pictures of the two chosen robots (MuJoCo's offscreen
   renderer: ``MUJOCO_GL=egl``; when it cannot render, the report's notes say why).
 
-**Selection bias and ``--confirm C``.** Each side's best is the robot that did best in
+**Selection bias and the confirmation.** Each side's best is the robot that did best in
 these same trainings, so its mean is biased upwards, the more so the more robots a side
-has. With ``--confirm C`` the two chosen robots are trained again under fresh seeds
-``seeds .. seeds+C-1`` and the verdict comes from those trainings alone (the choice made
-on seeds ``0 .. seeds-1`` cannot favour either side there); ``trainings.csv`` holds
-them too, marked ``confirmation``.
+has. With ``retrain.confirm=C`` (``--confirm C``) the two chosen robots are trained again
+under fresh seeds ``seeds .. seeds+C-1`` and the verdict comes from those trainings
+alone (the choice made on seeds ``0 .. seeds-1`` cannot favour either side there).
 
-Resumable: a training whose ``summary.json`` exists is not run again, so the same
-command continues a stopped comparison (more ``--seeds``, or more runs, add trainings).
-A folder trained under another config is refused. ``--jobs N`` trains N robots at a
-time in separate processes (each with ``+exp=train``'s threads: ``env.nthread=2``).
+A comparison folder made before the trainings were evo's (``trainings/<robot>_seed<s>/``
+beside a ``trainings.csv`` of the columns below) reads the same way.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import math
-import multiprocessing
 import shlex
 import sys
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -74,14 +66,14 @@ import pandas as pd
 import scipy.stats
 from omegaconf import DictConfig, OmegaConf
 
-from analysis.load import find_run_dirs, run_ids
+from analysis.evo_task import run_evo
+from analysis.load import find_run_dirs
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table, safe_name
-from evo.run.layout import RunLayout, TrainLayout
-from evo.run.records import read_run_summary, read_train_summary
+from evo.run.layout import RetrainLayout, RunLayout
+from evo.run.records import read_retrain_settings
 
 if TYPE_CHECKING:
-    from evo.edge import TrainingParts
-    from evo.robot import Limits, Robot
+    from evo.robot import Limits
     from evo.robot.builder import PhysicsParams
 
 Origin = Literal["evolved", "designed"]
@@ -100,11 +92,12 @@ seeds of a success rate can reach past 1)."""
 TRAINING_COLUMNS = ("robot", "origin", "method", "run", "structure", "seed", "arena", "env_steps",
                     "fitness", "success_rate", "eval_mean_return", "eval_time_to_target",
                     "eval_episodes", "wall_seconds")
-"""``trainings.csv``: ``robot`` the label compared (run name or file name), ``method``
-the GA run's method (``E+L``, ``E+L+I``, ...; ``designed`` for a hand-made robot),
-``run`` the GA run it came from ("" for a hand-made one), ``structure`` the robot's name,
-``eval_time_to_target`` simulated seconds (empty when no episode reached the target),
-``wall_seconds`` the training's wall time; the file adds ``confirmation``."""
+"""The columns of ``trainings.csv`` the comparison reads: ``robot`` the label compared
+(run name or file name), ``method`` the GA run's method (``E+L``, ``E+L+I``, ...;
+``designed`` for a hand-made robot), ``run`` the GA run it came from ("" for a hand-made
+one), ``structure`` the robot's name, ``eval_time_to_target`` simulated seconds (empty
+when no episode reached the target), ``wall_seconds`` the training's wall time; the file
+adds ``confirmation``."""
 CONFIDENCE = 0.95
 COMPARISON_FIGURE, CHOSEN_FIGURE = "comparison.png", "chosen.png"
 TRAININGS, COMPARISON, HEAD_TO_HEAD, PER_METHOD, REPORT, SETTINGS = (
@@ -114,62 +107,40 @@ TRAININGS, COMPARISON, HEAD_TO_HEAD, PER_METHOD, REPORT, SETTINGS = (
 
 
 class DesignerError(ValueError):
-    """A bad argument, run directory, robot file or output folder; the message names it."""
+    """A bad argument, run directory or comparison folder; the message names it."""
 
 
-# ---------------------------------------------------------------- the entrants
+# ---------------------------------------------------------------- the folder
 
 
-@dataclass(frozen=True)
-class Entrant:
-    """One robot of the comparison.
-
-    Attributes:
-        label: Its name in the comparison: the GA run's name or the robot file's stem.
-        origin: ``evolved`` (a GA run's best) or ``designed`` (a hand-made file).
-        run: The GA run's directory ("" for a hand-made robot).
-        method: The GA run's method (its ``summary.json``'s, e.g. ``E+L+I``; ``evolved``
-            when it names none), or ``designed``.
-        run_arena: The arena the run evolved in ("" when unknown or hand-made).
-        robot: The robot.
-    """
-
-    label: str
-    origin: Origin
-    method: str
-    run: str
-    run_arena: str
-    robot: Robot
+def robot_file(out: Path, label: str) -> Path:
+    """``<out>/robots/<robot>.json``: the robot compared under ``label``."""
+    return out / "robots" / f"{safe_name(label)}.json"
 
 
-def evolved_entrants(paths: Sequence[Path], limits: Limits) -> list[Entrant]:
-    """The best robot of every GA run in ``paths`` (run directories or folders of them),
-    labelled with the run's name.
+def read_trainings(folder: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The finished trainings of a comparison folder: the compared ones and the
+    confirmation's, each with :data:`TRAINING_COLUMNS` (a retraining's random-learner
+    trainings, if any, left out).
 
     Raises:
-        DesignerError: For a path that holds no run, or a run without a best robot.
+        DesignerError: For a folder without trainings.
     """
-    from evo.robot import InvalidRobotError, RobotFileError, load_robot
-
-    if not paths:
-        return []
+    path = folder / TRAININGS
     try:
-        dirs = find_run_dirs(paths)
-        summaries = [read_run_summary(RunLayout(d).summary) for d in dirs]
-    except (OSError, ValueError) as err:
-        raise DesignerError(f"--runs: {err}") from None
-    entrants = []
-    for run_dir, label, summary in zip(dirs, run_ids(dirs), summaries, strict=True):
-        if summary is None or summary.best_robot is None:
-            raise DesignerError(f"--runs: {RunLayout(run_dir).summary} names no best_robot "
-                                "(no robot trained yet?)")
-        try:
-            robot = load_robot(RunLayout(run_dir).robot(summary.best_robot), limits)
-        except (RobotFileError, InvalidRobotError) as err:
-            raise DesignerError(f"--runs: {err}") from None
-        entrants.append(Entrant(label, "evolved", summary.method or "evolved", str(run_dir),
-                                _run_arena(run_dir), robot))
-    return entrants
+        table = pd.read_csv(path)
+    except (OSError, pd.errors.EmptyDataError) as err:
+        raise DesignerError(f"{path}: no trainings to compare ({err!r})") from None
+    if "role" in table:
+        table = table[table["role"] == "seed"]
+    missing = [c for c in TRAINING_COLUMNS if c not in table]
+    if missing:
+        raise DesignerError(f"{path}: not a comparison's trainings (no {', '.join(missing)})")
+    confirmation = (table["confirmation"].astype(bool) if "confirmation" in table
+                    else pd.Series(False, index=table.index))
+    columns = list(TRAINING_COLUMNS)
+    return (table.loc[~confirmation, columns].reset_index(drop=True),
+            table.loc[confirmation, columns].reset_index(drop=True))
 
 
 def _run_arena(run_dir: Path) -> str:
@@ -182,170 +153,23 @@ def _run_arena(run_dir: Path) -> str:
     return "" if name is None else str(name)
 
 
-def designed_entrants(folder: Path, limits: Limits) -> list[Entrant]:
-    """Every ``*.json`` robot file of ``folder``, labelled with its file name.
-
-    Raises:
-        DesignerError: For a missing or empty folder, or a file that is not a valid robot.
-    """
-    from evo.robot import InvalidRobotError, RobotFileError, load_robot
-
-    if not folder.is_dir():
-        raise DesignerError(f"--robots {folder}: no such folder")
-    files = sorted(folder.glob("*.json"))
-    if not files:
-        raise DesignerError(f"--robots {folder}: no robot files (*.json) in it")
-    try:
-        return [Entrant(path.stem, "designed", "designed", "", "", load_robot(path, limits))
-                for path in files]
-    except (RobotFileError, InvalidRobotError) as err:
-        raise DesignerError(f"--robots: {err}") from None
-
-
-def check_labels(entrants: Sequence[Entrant]) -> None:
-    """Refuse two robots under one label (a run and a file of the same name)."""
-    seen: dict[str, Entrant] = {}
-    for entrant in entrants:
-        if entrant.label in seen:
-            raise DesignerError(
-                f"two robots are named {entrant.label!r} ({seen[entrant.label].origin} and "
-                f"{entrant.origin}); rename the run directory or the robot file")
-        seen[entrant.label] = entrant
-
-
-# ---------------------------------------------------------------- the folder
-
-
-def training_dir(out: Path, label: str, seed: int) -> Path:
-    """``<out>/trainings/<robot>_seed<s>/``: one training's ``+exp=train`` directory."""
-    return out / "trainings" / f"{safe_name(label)}_seed{seed}"
-
-
-def robot_file(out: Path, label: str) -> Path:
-    """``<out>/robots/<robot>.json``: the robot compared under ``label``."""
-    return out / "robots" / f"{safe_name(label)}.json"
-
-
-def open_folder(out: Path, cfg: DictConfig, overrides: Sequence[str]) -> None:
-    """Create ``out`` or continue it; refuse a folder trained under another config
-    (compared by what decides a training's numbers: ``evo.edge.what_trains``)."""
-    from evo.edge import settings_config, what_trains
-
-    if out.exists() and not out.is_dir():
-        raise DesignerError(f"--out {out}: exists and is not a folder")
-    out.mkdir(parents=True, exist_ok=True)
-    path, config = out / SETTINGS, settings_config(cfg)
-    if path.is_file():
-        stored = json.loads(path.read_text())
-        if what_trains(str(stored.get("config"))) != what_trains(config):
-            raise DesignerError(
-                f"--out {out}: its trainings ran under another config (overrides "
-                f"{' '.join(stored.get('overrides', [])) or 'none'}); give the same "
-                "overrides to continue it, or another --out")
-    path.write_text(json.dumps({"overrides": list(overrides), "config": config}, indent=2)
-                    + "\n")
-
-
-# ---------------------------------------------------------------- the trainings
-
-
-@dataclass(frozen=True)
-class Training:
-    """One training to run: the robot's file (saved in the folder), its seed, where."""
-
-    label: str
-    robot_file: Path
-    seed: int
-    out: Path
-
-
-def plan(out: Path, entrants: Sequence[Entrant], seeds: range) -> list[Training]:
-    """Every (robot, seed) training whose ``summary.json`` is not there yet; the robots
-    are saved in ``<out>/robots/`` first."""
-    from evo.robot.io import save_robot
-
-    todo = []
-    for entrant in entrants:
-        path = save_robot(entrant.robot, robot_file(out, entrant.label))
-        todo += [Training(entrant.label, path, s, training_dir(out, entrant.label, s))
-                 for s in seeds
-                 if not TrainLayout(training_dir(out, entrant.label, s)).summary.is_file()]
-    return todo
-
-
-def train_one(training: Training, parts: TrainingParts, limits: Limits, threads: int,
-              quiet: bool) -> str:
-    """Train one robot as ``+exp=train`` does (``evo.learners.session.train_robot``),
-    on ``threads`` torch threads; a top-level function, so a worker process runs it.
-
-    Returns:
-        The training's label and seed, for the log.
-    """
-    import torch
-    from rich.console import Console
-
-    from evo.learners.session import train_robot
-    from evo.robot import load_robot
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
-        train_robot(load_robot(training.robot_file, limits), parts, seed=training.seed,
-                    out=training.out, console=Console(quiet=quiet))
-    finally:
-        torch.set_num_threads(before)
-    return f"{training.label} seed {training.seed}"
-
-
-def run_trainings(todo: Sequence[Training], parts: TrainingParts, limits: Limits, *,
-                  threads: int, jobs: int, log: Callable[[str], None] = print) -> list[str]:
-    """Run ``todo``, ``jobs`` at a time (in this process when 1); a training that fails
-    is reported through ``log`` and left for the next call.
-
-    Returns:
-        What failed, one line each.
-    """
-    failed: list[str] = []
-
-    def attempt(training: Training, result: Callable[[], str]) -> None:
-        try:
-            log(f"done: {result()}")
-        except Exception as err:  # noqa: BLE001 - the others still train
-            failed.append(f"{training.label} seed {training.seed}: {err!r}")
-            log(f"failed: {failed[-1]}")
-
-    if jobs <= 1:
-        for training in todo:
-            attempt(training, functools.partial(train_one, training, parts, limits, threads,
-                                                quiet=False))
-        return failed
-    context = multiprocessing.get_context("spawn")  # no forked torch or MuJoCo state
-    with ProcessPoolExecutor(jobs, mp_context=context) as pool:
-        futures = {pool.submit(train_one, t, parts, limits, threads, True): t for t in todo}
-        for future in as_completed(futures):
-            attempt(futures[future], future.result)
-    return failed
-
-
-def collect(out: Path, entrants: Sequence[Entrant], seeds: range) -> pd.DataFrame:
-    """``trainings.csv``'s table: one row per finished training of ``entrants``."""
-    rows = []
-    for entrant in entrants:
-        for seed in seeds:
-            summary = read_train_summary(TrainLayout(training_dir(out, entrant.label, seed))
-                                         .summary)
-            if summary is None:
-                continue
-            ttt = summary.eval_time_to_target
-            rows.append(dict(
-                robot=entrant.label, origin=entrant.origin, method=entrant.method,
-                run=entrant.run,
-                structure=entrant.robot.name, seed=seed, arena=summary.arena,
-                env_steps=summary.env_steps, fitness=summary.fitness,
-                success_rate=summary.success_rate, eval_mean_return=summary.eval_mean_return,
-                eval_time_to_target=math.nan if ttt is None else ttt,
-                eval_episodes=summary.eval_episodes, wall_seconds=summary.wall_seconds))
-    return pd.DataFrame(rows, columns=list(TRAINING_COLUMNS))
+def _notes(folder: Path, trainings: pd.DataFrame, arena: str) -> list[str]:
+    """What the report notes of a folder: robots that evolved in another arena, and
+    trainings its settings plan that have not finished."""
+    notes = []
+    for run in trainings.loc[trainings["origin"] == "evolved", "run"].drop_duplicates():
+        label = trainings.loc[trainings["run"] == run, "robot"].iloc[0]
+        evolved_in = _run_arena(Path(str(run)))
+        if evolved_in and evolved_in != arena:
+            notes.append(f"{label} evolved in the {evolved_in} arena, not the {arena} one")
+    settings = read_retrain_settings(RetrainLayout(folder).settings)
+    if settings is not None and settings.first_seed is not None:
+        done = set(zip(trainings["robot"], trainings["seed"], strict=True))
+        notes += [f"failed (run the same command again to retry): {label} seed {seed}"
+                  for label in settings.labels
+                  for seed in range(settings.first_seed, settings.first_seed + settings.seeds)
+                  if (label, seed) not in done]
+    return notes
 
 
 # ---------------------------------------------------------------- statistics
@@ -559,7 +383,7 @@ def build_report(trainings: pd.DataFrame, *, arena: str, budget: int, seeds: int
 
 
 def write_report(out: Path, report: Report) -> Report:
-    """``trainings.csv``, ``comparison.csv``, ``head_to_head.csv``, the figures
+    """``comparison.csv``, ``per_method.csv``, ``head_to_head.csv``, the figures
     (:func:`write_figures`) and ``comparison.md``.
 
     Returns:
@@ -567,10 +391,6 @@ def write_report(out: Path, report: Report) -> Report:
     """
     from evo.run.files import write_csv, write_text
 
-    rows = [report.trainings.assign(confirmation=False)]
-    if report.confirm_trainings is not None:
-        rows.append(report.confirm_trainings.assign(confirmation=True))
-    write_csv(out / TRAININGS, pd.concat(rows, ignore_index=True))
     write_csv(out / COMPARISON, report.comparison)
     if not report.comparison.empty:
         write_csv(out / PER_METHOD, per_method(report.comparison))
@@ -653,7 +473,7 @@ def chosen_pictures(folder: Path, comparison: pd.DataFrame, chosen: Sequence[str
 def _folder_physics(folder: Path) -> tuple[Limits, PhysicsParams]:
     """The robot limits and module constants a comparison folder trained with (its
     ``settings.json``; the defaults for a folder without one)."""
-    from evo.edge import limits_of, physics_of
+    from evo.config import typed
     from evo.robot import Limits
     from evo.robot.builder import PhysicsParams
 
@@ -666,7 +486,9 @@ def _folder_physics(folder: Path) -> tuple[Limits, PhysicsParams]:
         raise ValueError(f"{path}: no readable config ({err!r})") from None
     if not isinstance(cfg, DictConfig):
         raise ValueError(f"{path}: its config is not a mapping")
-    return limits_of(cfg), physics_of(cfg)
+    return (typed(Limits, OmegaConf.select(cfg, "morphology.limits"), "morphology.limits"),
+            typed(PhysicsParams, OmegaConf.select(cfg, "morphology.physics"),
+                  "morphology.physics"))
 
 
 def folder_arena(folder: Path) -> str:
@@ -785,24 +607,50 @@ def _markdown(report: Report, out: Path, figures: Sequence[Path] = ()) -> str:
 # ---------------------------------------------------------------- CLI
 
 
-@dataclass(frozen=True)
-class Options:
-    """The command line's settings."""
+def report_folder(folder: Path, *, command: str | None = None) -> Report:
+    """Write the comparison of the folder's finished trainings (``comparison.md`` and
+    its tables and figures).
 
-    runs: tuple[Path, ...]
-    robots: Path
-    out: Path
-    seeds: int
-    jobs: int
-    overrides: tuple[str, ...]
-    confirm: int = 0
+    Args:
+        folder: A comparison folder (``+exp=designer``'s ``hydra.run.dir``).
+        command: The command the report names; by default the retraining's.
+
+    Raises:
+        DesignerError: For a folder without trainings, or trained in several arenas.
+    """
+    trainings, confirmation = read_trainings(folder)
+    arena = folder_arena(folder)
+    settings = read_retrain_settings(RetrainLayout(folder).settings)
+    budget = (settings.budget if settings is not None and settings.first_seed is not None
+              else int(trainings["env_steps"].min()))
+    seeds = int(trainings.groupby("robot")["seed"].nunique().max())
+    if command is None:
+        command = ("python evo/main.py " + " ".join(settings.overrides)
+                   if settings is not None and settings.first_seed is not None
+                   else f"python -m analysis.designer {folder}")
+    report = build_report(trainings, arena=arena, budget=budget, seeds=seeds,
+                          command=command, notes=_notes(folder, trainings, arena),
+                          confirmation=confirmation if len(confirmation) else None)
+    return write_report(folder, report)
 
 
-def parse_args(argv: Sequence[str] | None) -> Options:
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    """The command line: a folder to compare, or the older one-shot options."""
+    if argv and not argv[0].startswith("-") and "=" not in argv[0]:
+        report = argparse.ArgumentParser(
+            prog="python -m analysis.designer",
+            description="Compare the retrained robots of a folder (python evo/main.py "
+                        "+exp=designer). With --runs/--robots/--out instead: run the "
+                        "retraining first (the older command line).")
+        report.add_argument("folder", type=Path, help="the comparison's folder")
+        args = report.parse_args(argv)
+        args.out = None
+        return args
     cli = argparse.ArgumentParser(
         prog="python -m analysis.designer",
         description="Retrain the best robot of each GA run and every hand-made robot "
-                    "under +exp=train's protocol with several seeds, and compare them.")
+                    "under +exp=train's protocol with several seeds (python evo/main.py "
+                    "+exp=designer), and compare them.")
     cli.add_argument("--runs", type=Path, nargs="*", default=[],
                      help="GA run directories or folders of them (their best robots)")
     cli.add_argument("--robots", type=Path, default=Path("robots"),
@@ -829,108 +677,80 @@ def parse_args(argv: Sequence[str] | None) -> Options:
         cli.error(f"--jobs: expected at least 1, got {args.jobs}")
     if args.budget is not None and args.budget < 1:
         cli.error(f"--budget: expected a positive env-step count, got {args.budget}")
-    overrides = [*(["env=" + args.arena] if args.arena else []),
-                 *([f"learner.total_steps={args.budget}"] if args.budget else []),
-                 *args.overrides]
-    return Options(tuple(args.runs), args.robots, args.out, args.seeds, args.jobs,
-                   tuple(overrides), args.confirm)
+    args.folder = None
+    return args
 
 
-def compare(options: Options, *, command: str, log: Callable[[str], None] = print) -> Report:
-    """Train what is missing in ``options.out`` and write the report there.
-
-    Raises:
-        DesignerError: For a bad argument, run, robot file or folder (named).
-        evo.config.ConfigError: For a bad override (its key named).
-    """
-    from evo.edge import compose_config, limits_of, training_parts, warn_if_failures_cannot_end
-
-    overrides = ["+exp=train", *options.overrides, *runs_arena(options)]
-    cfg = compose_config(overrides)
-    parts, limits = training_parts(cfg), limits_of(cfg)
-    budget = parts.learner.total_steps
-    warn_if_failures_cannot_end(budget, "learner.total_steps", parts.learner, parts.env)
-    entrants = [*evolved_entrants(options.runs, limits),
-                *designed_entrants(options.robots, limits)]
-    check_labels(entrants)
-    open_folder(options.out, cfg, overrides)
-    seeds = range(options.seeds)
-    todo = plan(options.out, entrants, seeds)
-    log(f"{len(entrants) * options.seeds - len(todo)} of {len(entrants) * options.seeds} "
-        f"trainings already done; {len(todo)} to run")
-    failed = run_trainings(todo, parts, limits, threads=int(cfg.torch_threads),
-                           jobs=options.jobs, log=log)
-    arena = parts.env.name
-    notes = [f"{e.label} evolved in the {e.run_arena} arena, not the {arena} one"
-             for e in entrants if e.run_arena and e.run_arena != arena]
-    notes += [f"failed (run the same command again to retry): {f}" for f in failed]
-    trainings = collect(options.out, entrants, seeds)
-    confirmation = None
-    if options.confirm:
-        chosen = chosen_entrants(trainings, entrants)
-        fresh = range(options.seeds, options.seeds + options.confirm)
-        todo = plan(options.out, chosen, fresh)
-        log(f"confirmation of {' and '.join(e.label for e in chosen) or 'nothing yet'}: "
-            f"{len(todo)} trainings to run under seeds {fresh.start}..{fresh.stop - 1}")
-        failed = run_trainings(todo, parts, limits, threads=int(cfg.torch_threads),
-                               jobs=options.jobs, log=log)
-        notes += [f"failed (run the same command again to retry): {f}" for f in failed]
-        confirmation = collect(options.out, chosen, fresh)
-    report = build_report(trainings, arena=arena, budget=budget, seeds=options.seeds,
-                          command=command, notes=notes, confirmation=confirmation)
-    return write_report(options.out, report)
+def _quoted(path: Path) -> str:
+    """A path as a quoted string of Hydra's override grammar."""
+    return "'" + str(path).replace("\\", "\\\\").replace("'", "\\'") + "'"
 
 
-def chosen_entrants(trainings: pd.DataFrame, entrants: Sequence[Entrant]) -> list[Entrant]:
-    """The best evolved and the best hand-made robot of ``trainings`` (those present)."""
-    comparison = comparison_table(trainings)
-    if comparison.empty:
-        return []
-    best = {best_of(comparison, "evolved"), best_of(comparison, "designed")}
-    return [e for e in entrants if e.label in best]
+def designer_overrides(args: argparse.Namespace, log: Callable[[str], None] = print
+                       ) -> list[str]:
+    """The ``+exp=designer`` command line that the older options stand for."""
+    runs = ",".join(_quoted(p) for p in args.runs)
+    return ["+exp=designer", f"retrain.runs=[{runs}]", f"retrain.robots={_quoted(args.robots)}",
+            f"retrain.seeds={args.seeds}", f"retrain.confirm={args.confirm}",
+            f"executor.workers={args.jobs}",
+            *(["env=" + args.arena] if args.arena else []),
+            *([f"learner.total_steps={args.budget}"] if args.budget else []),
+            *runs_arena(args.runs, args.overrides if args.arena is None else ["env="], log),
+            f"hydra.run.dir={args.out}", *args.overrides]
 
 
-def runs_arena(options: Options, log: Callable[[str], None] = print) -> list[str]:
+FLAGS = {"retrain.runs": "--runs", "retrain.robots": "--robots", "retrain.seeds": "--seeds",
+         "retrain.confirm": "--confirm", "hydra.run.dir": "--out"}
+"""The older command line's name of each key that a message may name."""
+
+
+def _as_flags(message: str) -> str:
+    for key, flag in FLAGS.items():
+        message = message.replace(key, flag)
+    return message
+
+
+def runs_arena(runs: Sequence[Path], overrides: Sequence[str],
+               log: Callable[[str], None] = print) -> list[str]:
     """``env=<arena>`` of the GA runs when no override chooses the env and every run
     evolved in the same arena of ``conf/env``; nothing otherwise."""
-    from evo.edge import CONF_DIR
-
-    if not options.runs or any(o.startswith(("env=", "+env=")) for o in options.overrides):
+    if not runs or any(o.startswith(("env=", "+env=")) for o in overrides):
         return []
     try:
-        arenas = {_run_arena(d) for d in find_run_dirs(options.runs)}
+        arenas = {_run_arena(d) for d in find_run_dirs(list(runs))}
     except (OSError, ValueError) as err:
         raise DesignerError(f"--runs: {err}") from None
     arena = arenas.pop() if len(arenas) == 1 else ""
-    if not (arena and (CONF_DIR / "env" / f"{arena}.yaml").is_file()):
+    if not (arena and (CONF_ENV / f"{arena}.yaml").is_file()):
         return []
     log(f"arena: {arena}, where the runs evolved (--arena to choose another)")
     return [f"env={arena}"]
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the comparison; exit 0, 2 with one line naming a bad argument, config key or
-    folder in use, 1 when a training failed (the report holds the others), 130 when
-    interrupted (run the same command again to continue)."""
-    from evo.config import ConfigError
-    from evo.run.files import RunDirectoryBusy, RunLock
+CONF_ENV = Path(__file__).resolve().parents[1] / "conf" / "env"
+"""The arenas of ``conf/env``."""
 
-    options = parse_args(argv)
-    command = "python -m analysis.designer " + shlex.join(
-        sys.argv[1:] if argv is None else list(argv))
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Compare a folder, or (the older command line) run the retraining and then
+    compare; exit 0, 2 with one line naming a bad argument, config key or folder in
+    use, 1 when a training failed (the report holds the others), the task's 130 or 143
+    when interrupted (run the same command again to continue)."""
+    given = sys.argv[1:] if argv is None else list(argv)
+    args = parse_args(given)
+    folder, command = args.folder, None
     try:
-        options.out.mkdir(parents=True, exist_ok=True)
-        with RunLock(options.out) as lock:
-            lock.claim()
-            report = compare(options, command=command)
-    except (DesignerError, ConfigError, RunDirectoryBusy) as err:
+        if folder is None:
+            status = run_evo(designer_overrides(args), rename=_as_flags)
+            if status != 0:
+                return status
+            folder = args.out
+            command = "python -m analysis.designer " + shlex.join(given)
+        report = report_folder(folder, command=command)
+    except DesignerError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"interrupted; {options.out} is incomplete: run the same command again to "
-              "continue it", file=sys.stderr)
-        return 130
-    print(f"{report.verdict}\nreport: {options.out / REPORT}")
+    print(f"{report.verdict}\nreport: {folder / REPORT}")
     return 1 if any(n.startswith("failed") for n in report.notes) else 0
 
 

@@ -67,14 +67,19 @@ import json, sys
 from pathlib import Path
 import analysis.noise_ceiling as nc
 try:
-    from evo.retrain import Settings, read_trainings
-except ImportError:  # before the trainings moved to evo.retrain
-    from analysis.noise_ceiling import Settings, read_trainings
+    from evo.run.records import RetrainSettings as Settings, read_trainings
+    def trainings(out): return read_trainings(out / "trainings.csv")
+except ImportError:  # before the retraining's records were evo.run.records'
+    try:
+        from evo.retrain import Settings, read_trainings
+    except ImportError:  # before the trainings moved to evo.retrain
+        from analysis.noise_ceiling import Settings, read_trainings
+    def trainings(out): return read_trainings(out)
 out = Path(sys.argv[1])
 summary = json.loads((out / "summary.json").read_text())
 settings = Settings(**{k: tuple(v) if isinstance(v, list) else v
                        for k, v in summary["settings"].items()})
-nc.write_report(out, read_trainings(out), settings, wall_seconds=summary["wall_seconds"],
+nc.write_report(out, trainings(out), settings, wall_seconds=summary["wall_seconds"],
                 command=summary["command"])
 """
 """Writes a noise-ceiling folder's report again from its trainings (either tree's code)."""

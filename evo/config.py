@@ -200,7 +200,9 @@ def current(cfg: DictConfig) -> DictConfig:
     * ``ga.mutation_operators`` given by name (a key of
       :data:`evo.robot.operators.MUTATIONS`) become ``{_target_: <its class>}``;
     * a ``learner`` without ``_target_`` (``name: ppo|random`` and ``update``) becomes
-      the class :data:`OLD_LEARNERS` names, with its other keys, ``update`` included.
+      the class :data:`OLD_LEARNERS` names, with its other keys, ``update`` included;
+    * a ``noise_ceiling`` node (the retrain task's keys before they were ``retrain``'s)
+      becomes ``retrain``, without ``resamples`` (the report's, not the trainings').
 
     A config in today's form comes back as it was (a copy; ``cfg`` is left alone).
 
@@ -226,7 +228,31 @@ def current(cfg: DictConfig) -> DictConfig:
                 raise ConfigError(f"learner.name: unknown learner {name!r}; expected one of "
                                   f"{', '.join(OLD_LEARNERS)}")
             learner._target_ = OLD_LEARNERS[name]
+        older = out.pop(OLD_RETRAIN, None)
+        if isinstance(older, DictConfig) and "retrain" not in out:
+            older.pop("resamples", None)
+            out.retrain = older
     return out
+
+
+OLD_RETRAIN = "noise_ceiling"
+"""The retrain task's config node before it was ``retrain`` (an older ``config.yaml``,
+and the command line's older spelling: ``noise_ceiling.random=24``)."""
+
+
+def older_overrides(overrides: list[str]) -> list[str]:
+    """The command line with the older spelling of the retrain task's keys in today's:
+    ``noise_ceiling.<key>=...`` becomes ``retrain.<key>=...``; ``noise_ceiling.resamples``,
+    the report's, is dropped (``python -m analysis.noise_ceiling DIR --resamples R``)."""
+    kept = []
+    for override in overrides:
+        key, sep, value = override.partition("=")
+        if sep and key.startswith(f"{OLD_RETRAIN}."):
+            if key == f"{OLD_RETRAIN}.resamples":
+                continue
+            override = f"retrain.{key.removeprefix(OLD_RETRAIN + '.')}={value}"
+        kept.append(override)
+    return kept
 
 
 def _mutation(op: Any, key: str) -> Any:

@@ -153,36 +153,38 @@ def what_trains(config: str) -> tuple[object, ...] | None:
 
 def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
                overrides: Sequence[str]) -> Retraining:
-    """The noise ceiling's trainings of ``config`` under ``cfg`` (``evo.retrain``):
-    settings and folder checked, ``settings.json`` stored (the folder is created if
-    needed); nothing is trained yet.
+    """The trainings of ``config`` under ``cfg`` (``evo.retrain``): settings and folder
+    checked, ``settings.json`` stored (the folder is created if needed); nothing is
+    trained yet.
 
     Raises:
         evo.retrain.RetrainError: For bad robots or a folder of other settings (named).
         ConfigError: For a config that cannot train (its key named).
     """
     from evo.evaluation import Job
-    from evo.retrain import RetrainError, Retraining, Settings, load_structures, open_folder
+    from evo.retrain import Retraining, load_entries, open_folder
+    from evo.run.records import RetrainSettings
 
     parts = training_parts(cfg)
     budget = parts.learner.total_steps if config.budget is None else config.budget
-    if budget < 1:
-        raise RetrainError(f"noise_ceiling.budget: expected a positive env-step count, "
-                           f"got {budget}")
-    robots = load_structures(None if config.robots is None else Path(config.robots),
-                             config.random, root_seed, generator=generator_of(cfg),
-                             limits=limits_of(cfg))
-    settings = Settings(tuple(overrides), budget, config.seeds, root_seed, config.baseline,
-                        tuple(r.name for r in robots), settings_config(cfg))
+    entries = load_entries(config, root_seed, generator=generator_of(cfg),
+                           limits=limits_of(cfg))
+    baseline = config.baseline and parts.learner.update
+    settings = RetrainSettings(
+        tuple(overrides), budget, config.seeds, root_seed, baseline,
+        tuple(e.robot.name for e in entries), settings_config(cfg),
+        first_seed=config.first_seed, evaluate=config.evaluate, confirm=config.confirm,
+        labels=tuple(e.label for e in entries))
     open_folder(out, settings, what_trains)
-    warn_if_failures_cannot_end(budget, "noise_ceiling.budget", parts.learner, parts.env)
+    warn_if_failures_cannot_end(budget, "retrain.budget", parts.learner, parts.env)
+    episodes = parts.learner.eval_episodes if config.evaluate else 0
     # The random learner ("random"): the same network, never updated.
     random_learner = dataclasses.replace(parts.learner, update=False)
     jobs = {role: Job(parts.physics, parts.env, learner, str(out), learner.name,
-                      record=parts.record, config_yaml=settings.config)
+                      record=parts.record, config_yaml=settings.config,
+                      eval_episodes=episodes)
             for role, learner in (("seed", parts.learner), ("baseline", random_learner))}
-    return Retraining(out, settings, tuple(robots), jobs,
-                      config.baseline and parts.learner.update)
+    return Retraining(out, settings, tuple(entries), jobs, parts.env.name)
 
 
 __all__ = [

@@ -38,7 +38,7 @@ from evo.learners.common import (
     load_checkpoint,
     save_checkpoint,
 )
-from evo.learners.rollouts import play
+from evo.learners.rollouts import PolicyEvaluation, evaluate_policy, play
 from evo.record import (
     Episode,
     OpenRecorder,
@@ -70,6 +70,9 @@ class Job:
     batch (0 = none); an evaluation past it stops with an ``EvaluationTimeout`` error."""
     early: EarlyRejection = field(default_factory=EarlyRejection)
     """When an offspring's training may stop early (``ga.early_rejection``)."""
+    eval_episodes: int = 0
+    """Episodes of a deterministic evaluation after training (the policy's mean action,
+    seed + 1, as ``+exp=train`` evaluates it); 0: none."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +132,8 @@ class Outcome:
     ``fitness`` is Eq. 8 over the episodes it completed."""
     predicted: float = float("nan")
     """The early-rejection rule's last prediction of the final fitness."""
+    evaluation: PolicyEvaluation | None = None
+    """The deterministic evaluation after training (``Job.eval_episodes``), if any."""
 
 
 def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
@@ -306,10 +311,14 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
         save_policy(result.policy, layout.policy(candidate.name), job.learner,
                     robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")
+        evaluation = (evaluate_policy(robot, result.policy, physics=job.physics, env=job.env,
+                                      episodes=job.eval_episodes, seed=candidate.seed + 1)
+                      if job.eval_episodes else None)
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
                         "episodes": result.episodes, "predicted": predicted,
                         "status": "stopped-early" if result.stopped_early else "complete"})
     return Outcome(candidate.birth, candidate.name, fitness=result.fitness,
                    env_steps=result.env_steps, episodes=result.episodes,
                    extra={"unstable": float(result.unstable)},
-                   stopped_early=result.stopped_early, predicted=predicted)
+                   stopped_early=result.stopped_early, predicted=predicted,
+                   evaluation=evaluation)

@@ -40,25 +40,35 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from analysis.noise_sweep import run_trial, trial_overrides
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
-from evo.config import ConfigError, current, method_label, structure_letter, typed
+from evo.config import (
+    ConfigError,
+    current,
+    method_label,
+    older_overrides,
+    structure_letter,
+    typed,
+)
 from evo.edge import (
     CONF_DIR,
     executor_of,
     generator_of,
     limits_of,
     physics_of,
+    retraining,
     training_parts,
     warn_if_failures_cannot_end,
 )
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
+from evo.fidelity import agreement, ceiling_line
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.learners.common import SavePolicy
+from evo.pool import EvaluationPool
 from evo.record import OpenRecorder, RecordConfig
 from evo.record.run import RunMetadata
+from evo.retrain import RetrainConfig, RetrainError, run_trainings
 from evo.robot import (
     InvalidRobotError,
     Robot,
@@ -74,9 +84,10 @@ from evo.run.files import (
     write_failure,
     write_text,
 )
-from evo.run.layout import RunLayout
-from evo.run.records import HistoryRow
+from evo.run.layout import RetrainLayout, RunLayout
+from evo.run.records import HistoryRow, read_retrain_settings
 from evo.run.store import RunStore, SavedState
+from evo.sweep import trial_overrides
 
 
 def _robot(cfg: DictConfig) -> Robot:
@@ -434,34 +445,48 @@ def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None, *,
 
 
 def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, float]:
-    """One trial of ``+exp=noise_sweep``: agreement between seeds and core-seconds per
-    robot, for the Optuna sweeper (``analysis.noise_sweep``)."""
-    return run_trial(cfg, out, trial_overrides()).values()
+    """One trial of ``+exp=noise_sweep`` (``evo.sweep``): the retraining of the sweep's
+    fixed sample under the trial's config; returns its agreement between seeds and
+    core-seconds per robot to the Optuna sweeper."""
+    from evo.sweep import SweepSettings, record_trial, trial_result
+
+    sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
+    config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
+                           baseline=False)
+    overrides = trial_overrides()
+    try:
+        retrain = retraining(cfg, out, config, root_seed=sweep.robot_seed, overrides=overrides)
+    except RetrainError as err:
+        raise ConfigError(f"noise_sweep: {err}") from None
+    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
+    return record_trial(out, trial_result(trainings, sweep, overrides, out)).values()
 
 
 def run_retrain(cfg: DictConfig, out: Path, lock: RunLock) -> None:
-    """Train fixed structures under independent seeds and write their noise ceiling
-    (``+exp=retrain``, ``analysis.noise_ceiling``); ``resume=DIR`` continues, reusing
-    the finished trainings (so does the same command run again). ``config.yaml`` is
-    written once the folder is known to hold no noise ceiling of other settings."""
-    from analysis.noise_ceiling import NoiseCeilingError, run
-    from evo.retrain import RetrainConfig, stored_settings
-
+    """Train fixed structures under independent seeds (``+exp=retrain``, the noise
+    ceiling; ``+exp=designer``, the designer comparison): ``evo.retrain``.
+    ``resume=DIR`` continues, reusing the finished trainings (so does the same command
+    run again). ``config.yaml`` is written once the folder is known to hold no
+    trainings of other settings. The reports are ``analysis``'s."""
     resuming = cfg.resume is not None
     if resuming:
         cfg = _resumed_config(Path(str(cfg.resume)))
-    config = typed(RetrainConfig, cfg.get("noise_ceiling"), "noise_ceiling")
+    config = typed(RetrainConfig, cfg.get("retrain"), "retrain")
     try:
-        stored = stored_settings(out) if resuming else None
-        overrides = (tuple(stored["overrides"]) if stored is not None
-                     else trial_overrides())
-        report = run(cfg, out, config, root_seed=check_seed(cfg), overrides=overrides,
-                     command="python evo/main.py " + " ".join(overrides),
-                     on_ready=lock.claim if resuming else functools.partial(
-                         _write_config, cfg, out, lock))
-    except NoiseCeilingError as err:
+        stored = read_retrain_settings(RetrainLayout(out).settings) if resuming else None
+        overrides = stored.overrides if stored is not None else trial_overrides()
+        retrain = retraining(cfg, out, config, root_seed=check_seed(cfg), overrides=overrides)
+    except (RetrainError, ValueError) as err:  # ValueError: an unreadable settings.json
         raise ConfigError(str(err)) from None
-    print(f"report: {report}")
+    if resuming:
+        lock.claim()
+    else:
+        _write_config(cfg, out, lock)
+    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
+    if not config.evaluate:
+        print(f"noise ceiling: {ceiling_line(agreement(trainings))}")
+    report = "analysis.designer" if config.evaluate else "analysis.noise_ceiling"
+    print(f"{len(trainings)} trainings in {out}; report: python -m {report} {out}")
 
 
 TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
@@ -612,7 +637,7 @@ def cli(code: EvolveCode = EVO_CODE) -> None:
     (``[".../evo/main.py", *overrides]``) and calls this.
     """
     _check_run_dir_arg(sys.argv[1:])
-    sys.argv = _resume_in_place(sys.argv)
+    sys.argv = _resume_in_place([sys.argv[0], *older_overrides(sys.argv[1:])])
 
     @hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
     def run(cfg: DictConfig) -> object:

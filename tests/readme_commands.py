@@ -92,10 +92,12 @@ EXCLUDED: dict[str, str] = {
         "submits Slurm jobs: needs a cluster and the submitit plugin",
     "python evo/main.py +exp=ablation hydra/launcher=ray hydra.launcher.ray.init.address=auto":
         "needs a running Ray cluster and the Ray launcher plugin",
-    "python evo/main.py +exp=retrain noise_ceiling.random=24 noise_ceiling.budget=100000 "
+    "python evo/main.py +exp=retrain retrain.random=24 retrain.budget=100000 "
     "hydra.run.dir=noise/ record=off": "48 trainings of 100k env steps (an hour); test_retrain "
                                        "runs the task end to end on three robots, resumed, "
                                        "and against the alias below",
+    "python -m analysis.noise_ceiling noise/": "reads the folder the retrain task above makes; "
+                                               "test_retrain reports on its three robots'",
     "python -m analysis.noise_ceiling --random 24 --seed 0 --seeds 2 --budget 100000 --out "
     "noise/ record=off": "cannot be shrunk as typed: its report needs episodes that end (a "
                          "budget of 32 arenas x T_max = 32k env steps per training, 6 trainings "
@@ -130,6 +132,8 @@ EXCLUDED: dict[str, str] = {
     "--confirm 3": "trains every run's best robot and the four hand-made ones 3 times at 150k "
                    "env steps (about an hour per arena on two cores); tests/test_designer.py "
                    "runs the tool end to end on a tiny budget, resumed",
+    "python -m analysis.designer designer/": "reads the folder the command above makes; "
+                                             "tests/test_designer.py reports on its tiny one's",
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",

@@ -1,5 +1,6 @@
-"""Evolution against the designer (``analysis.designer``) and the time to target of the
-deterministic evaluation (``evo.learners.rollouts.evaluate_policy``).
+"""Evolution against the designer (``+exp=designer``'s trainings, ``analysis.designer``'s
+comparison) and the time to target of the deterministic evaluation
+(``evo.learners.rollouts.evaluate_policy``).
 
 The comparison runs end to end on a tiny budget with real PPO and MuJoCo: two hand-made
 robots and the best robot of a GA run directory made from a robot file, two seeds each.
@@ -9,7 +10,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
+import subprocess
+import sys
 from functools import cache
 from pathlib import Path
 
@@ -213,12 +217,10 @@ def test_the_comparison_runs_end_to_end_on_a_tiny_budget(
     assert (trainings["arena"] == "cluttered").all() and (trainings["eval_episodes"] == 3).all()
     assert (trainings["env_steps"] >= 512).all() and trainings["success_rate"].between(0, 1).all()
     for row in trainings.itertuples():
-        summary = json.loads((out / "trainings" / f"{row.robot}_seed{row.seed}"
-                              / "summary.json").read_text())
-        assert summary["eval_mean_return"] == pytest.approx(row.eval_mean_return)
-        ttt = summary["eval_time_to_target"]
-        assert (ttt is None) == (summary["success_rate"] == 0), summary
-        assert ttt is None or 0 < ttt <= 40 * 0.05, "within the episode's 40 steps of 0.05 s"
+        assert (out / "evals" / f"{row.robot}_seed{row.seed}.pt").is_file()
+        ttt = row.eval_time_to_target
+        assert math.isnan(ttt) == (row.success_rate == 0), row
+        assert math.isnan(ttt) or 0 < ttt <= 40 * 0.05, "within the episode's 40 steps of 0.05 s"
 
     table = pd.read_csv(out / "comparison.csv")
     assert list(table["eval_mean_return_mean"]) == sorted(table["eval_mean_return_mean"],
@@ -283,24 +285,26 @@ def can_render() -> bool:
 
 
 def test_a_comparison_without_opengl_is_done_and_says_why_it_has_no_pictures(
-        comparison: tuple[Path, list[str]], tmp_path: Path,
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    out, argv = comparison
+        comparison: tuple[Path, list[str]], tmp_path: Path) -> None:
+    """The report of a folder (``python -m analysis.designer DIR``) where MuJoCo has no
+    OpenGL to render with: GLFW, which needs a display, and none."""
+    out, _ = comparison
     copy = tmp_path / "out"
     shutil.copytree(out, copy, ignore=shutil.ignore_patterns("*.png"))
-    argv = [str(copy) if arg == str(out) else arg for arg in argv]
-
-    def no_gl(*args: object, **kwargs: object) -> None:
-        raise RenderError("no OpenGL context for offscreen rendering (MUJOCO_GL=none)")
-
-    monkeypatch.setattr("evo.robot.render.render_image", no_gl)
-    assert main(argv) == 0, "the comparison is done all the same"
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run([sys.executable, "-m", "analysis.designer", str(copy)], cwd=REPO,
+                          env={**env, "MUJOCO_GL": "glfw", "PYTHONPATH": str(REPO)},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, "the comparison is done all the same\n" + done.stderr[-2000:]
     report = (copy / "comparison.md").read_text()
     notes = report.split("## Notes")[1]
     assert "no pictures of the chosen robots (chosen.png): no OpenGL context" in notes
     assert not (copy / "chosen.png").exists() and "](chosen.png)" not in report
     assert (copy / "comparison.png").is_file() and "](comparison.png)" in report
     assert (copy / "head_to_head.csv").is_file() and "**Verdict:**" in report
+    for name in ("comparison.csv", "per_method.csv", "head_to_head.csv"):
+        assert (copy / name).read_bytes() == (out / name).read_bytes(), \
+            f"the folder's report again: {name} as the first time"
 
     # docs/pictures.py --designer draws the figures again from the folder's files.
     assert folder_arena(copy) == "cluttered"
@@ -308,23 +312,48 @@ def test_a_comparison_without_opengl_is_done_and_says_why_it_has_no_pictures(
     written, notes = write_figures(copy, pd.read_csv(copy / "comparison.csv"), "cluttered",
                                    figure=docs / "designer_cluttered.png",
                                    pictures=docs / "designer_robots_cluttered.png")
-    assert written == [docs / "designer_cluttered.png"] and written[0].is_file()
-    assert len(notes) == 1 and "designer_robots_cluttered.png" in notes[0], notes
+    assert written[0] == docs / "designer_cluttered.png" and written[0].is_file()
+    if can_render():
+        assert written[1].is_file() and not notes
 
 
 def test_a_rerun_skips_finished_trainings_and_refuses_another_config(
-        comparison: tuple[Path, list[str]], capsys: pytest.CaptureFixture[str]) -> None:
+        comparison: tuple[Path, list[str]], capfd: pytest.CaptureFixture[str]) -> None:
     out, argv = comparison
-    summaries = sorted((out / "trainings").glob("*/summary.json"))
-    stamps = {p: p.stat().st_mtime_ns for p in summaries}
-    redo = out / "trainings" / "four_wheeler_seed1" / "summary.json"
-    redo.unlink()
-    capsys.readouterr()
+    table = pd.read_csv(out / "trainings.csv")
+    redo = table.index[table["name"] == "four_wheeler_seed1"]
+    table.drop(redo).to_csv(out / "trainings.csv", index=False)
+    policies = {p: p.stat().st_mtime_ns for p in (out / "evals").glob("*.pt")}
+    capfd.readouterr()
     assert main([*argv, "--jobs", "2"]) == 0
-    assert "5 of 6 trainings already done; 1 to run" in capsys.readouterr().out
-    assert redo.is_file(), "the missing training ran again"
-    assert all(p.stat().st_mtime_ns == stamps[p] for p in summaries if p != redo), \
+    assert "9 of 10 trainings already done; 1 to run" in capfd.readouterr().out
+    again = pd.read_csv(out / "trainings.csv")
+    assert len(again) == 6 + 4, "the missing training ran again, and the confirmation's 4"
+    redone = out / "evals" / "four_wheeler_seed1.pt"
+    assert redone.stat().st_mtime_ns != policies[redone], "the missing training ran again"
+    assert all(p.stat().st_mtime_ns == t for p, t in policies.items() if p != redone), \
         "a finished training was trained again"
-    assert len(pd.read_csv(out / "trainings.csv")) == 6 + 4, "and the confirmation's 4"
+    row = again.set_index("name").loc["four_wheeler_seed1"]
+    first = table.set_index("name").loc["four_wheeler_seed1"]
+    assert row["fitness"] == pytest.approx(first["fitness"], abs=1e-9), "the same seed"
     assert main([*argv, "learner.lr=0.5"]) == 2
-    assert "another config" in capsys.readouterr().err
+    assert "other settings (config differ" in capfd.readouterr().err
+
+
+def test_the_trainings_are_those_of_exp_train(comparison: tuple[Path, list[str]],
+                                              tmp_path: Path) -> None:
+    """``+exp=designer`` trains a robot as ``+exp=train robot=FILE seed=S`` does: the same
+    fitness and the same deterministic evaluation."""
+    out, _ = comparison
+    cluttered = [*TINY, "env=cluttered"]  # the arena the run evolved in
+    done = subprocess.run([sys.executable, str(REPO / "evo" / "main.py"), "+exp=train",
+                           f"robot={out / 'robots' / 'four_wheeler.json'}", "seed=1",
+                           *cluttered, f"hydra.run.dir={tmp_path / 'train'}"], cwd=tmp_path,
+                          env={**os.environ, "PYTHONPATH": str(REPO), "MUJOCO_GL": "egl"},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    alone = json.loads((tmp_path / "train" / "summary.json").read_text())
+    row = pd.read_csv(out / "trainings.csv").set_index("name").loc["four_wheeler_seed1"]
+    assert row["fitness"] == pytest.approx(alone["fitness"], abs=1e-12)
+    assert row["eval_mean_return"] == pytest.approx(alone["eval_mean_return"], abs=1e-12)
+    assert row["success_rate"] == alone["success_rate"]

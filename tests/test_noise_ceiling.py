@@ -14,8 +14,10 @@ import pytest
 from analysis import noise_ceiling as nc
 from analysis.bootstrap import Resampling
 from analysis.noise_study import main as study_main
-from evo.retrain import late_fitness, plan_trainings
+from evo import fidelity
+from evo.retrain import Entry, confirmation_plan, late_fitness, plan_trainings
 from evo.robot import load_robot, parse_robot, save_robot
+from evo.run.records import RetrainSettings
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -47,14 +49,14 @@ def test_icc_is_the_share_of_variance_between_structures() -> None:
     between, within = 2.0, 1.0  # variances: ICC = 2 / (2 + 1)
     quality = rng.normal(scale=np.sqrt(between), size=4000)
     seeds = [quality + rng.normal(scale=np.sqrt(within), size=4000) for _ in range(3)]
-    assert nc.icc(*seeds) == pytest.approx(2 / 3, abs=0.02)
-    assert nc.icc(quality, quality) == pytest.approx(1.0)
+    assert fidelity.icc(*seeds) == pytest.approx(2 / 3, abs=0.02)
+    assert fidelity.icc(quality, quality) == pytest.approx(1.0)
 
 
 def test_top_quarter_and_baseline_shares_on_a_small_case() -> None:
     a = np.array([8.0, 7, 6, 5, 4, 3, 2, 1])
     b = np.array([1.0, 7, 6, 5, 4, 3, 2, 8])  # the top two: {0, 1} against {1, 7}
-    assert nc.top_quarter(a, b) == pytest.approx(0.5)
+    assert fidelity.top_quarter(a, b) == pytest.approx(0.5)
     rows = pd.DataFrame(dict(structure=np.tile(np.arange(8), 2), train_seed=np.repeat([0, 1], 8),
                              fitness=np.concatenate([a, b])))
     baseline = pd.Series(np.full(8, 4.0), index=np.arange(8))  # means 4.5 ... 4.5, 7, 6, ...
@@ -70,15 +72,58 @@ def test_late_fitness_weights_the_episodes_of_the_second_half() -> None:
     assert np.isnan(late_fitness(curve.iloc[:2], budget=400))
 
 
+def entries(*stems: str, origin: str = "designed") -> list[Entry]:
+    return [Entry(stem, origin, origin, "", load_robot(REPO / "robots" / f"{stem}.json"))
+            for stem in stems]
+
+
+def settings(**kwargs: object) -> RetrainSettings:
+    given: dict[str, object] = {"overrides": (), "budget": 128, "seeds": 2, "root_seed": 3,
+                                "baseline": True, "structures": (), "config": ""} | kwargs
+    return RetrainSettings(**given)  # type: ignore[arg-type]
+
+
 def test_training_seeds_depend_on_the_structure_and_replicate_only() -> None:
-    plan = plan_trainings(["robot-0000000a", "robot-0000000b"], seeds=2, root=3,
-                             baseline=True)
-    reordered = plan_trainings(["robot-0000000b", "robot-0000000a"], seeds=3, root=3,
-                                  baseline=False)
+    plan = plan_trainings(entries("snake", "inchworm"), settings())
+    reordered = plan_trainings(entries("inchworm", "snake"), settings(seeds=3, baseline=False))
     seeds = {t.name: t.seed for t in plan}
     assert all(seeds[t.name] == t.seed for t in reordered if t.name in seeds)
     assert len({t.seed for t in plan if t.role == "seed"}) == 4, "independent seeds"
-    assert seeds["robot-0000000a_baseline"] == seeds["robot-0000000a_s0"]
+    snake = load_robot(REPO / "robots" / "snake.json").name
+    assert seeds[f"{snake}_baseline"] == seeds[f"{snake}_s0"]
+    # A structure two labels share is trained once with spawned seeds, twice by label.
+    twice = [*entries("snake"), Entry("snake_again", "designed", "designed", "",
+                                      load_robot(REPO / "robots" / "snake.json"))]
+    assert len(plan_trainings(twice, settings(baseline=False))) == 2
+    by_label = plan_trainings(twice, settings(baseline=False, first_seed=5))
+    assert [(t.name, t.seed) for t in by_label] == [
+        ("snake_seed5", 5), ("snake_seed6", 6), ("snake_again_seed5", 5),
+        ("snake_again_seed6", 6)], "as +exp=train seed=5 and seed=6"
+
+
+def test_the_confirmation_trains_the_best_of_each_origin_under_fresh_seeds() -> None:
+    robots = [*entries("snake", "inchworm"), *entries("four_wheeler", origin="evolved"),
+              Entry("E+L_seed1", "evolved", "E+L", "", load_robot(REPO / "robots" /
+                                                                   "twisted_four_wheeler.json"))]
+    rows = pd.DataFrame({
+        "robot": ["snake", "snake", "inchworm", "inchworm", "four_wheeler", "four_wheeler",
+                  "E+L_seed1", "E+L_seed1"],
+        "origin": ["designed"] * 4 + ["evolved"] * 4, "role": "seed", "confirmation": False,
+        "eval_mean_return": [0.1, 0.3, 0.5, 0.4, 0.9, 0.8, 1.0, 0.2],
+        "fitness": [0.9, 0.9, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1]})
+    plan = confirmation_plan(robots, rows, settings(first_seed=0, evaluate=True, confirm=2))
+    assert [(t.label, t.seed, t.replicate, t.confirmation) for t in plan] == [
+        ("four_wheeler", 2, 2, True), ("four_wheeler", 3, 2 + 1, True),
+        ("inchworm", 2, 2, True), ("inchworm", 3, 3, True)], "by mean evaluation return"
+    by_fitness = confirmation_plan(robots, rows, settings(first_seed=0, confirm=2))
+    assert {t.label for t in by_fitness} == {"snake", "four_wheeler"}, "no evaluation: fitness"
+    # Once confirmation trainings are in the table, a resumed folder keeps its choice.
+    done = pd.concat([rows, pd.DataFrame({"robot": ["snake"], "origin": ["designed"],
+                                          "role": ["seed"], "confirmation": [True],
+                                          "eval_mean_return": [0.0], "fitness": [0.0]})])
+    kept = confirmation_plan(robots, done, settings(first_seed=0, evaluate=True, confirm=2))
+    assert {t.label for t in kept} == {"snake"}
+    assert confirmation_plan(robots, rows, settings(first_seed=0, evaluate=True)) == []
 
 
 # ---------------------------------------------------------------- the tool, for real
@@ -148,7 +193,7 @@ def test_immobile_structures_rank_last_and_seeds_agree(
     # versions), so the test asks only that structure explains part of the variance,
     # which the immobile structures' -1 against the movers guarantees.
     by_seed = [seeds[replicate].to_numpy() for replicate in seeds.columns]
-    assert metrics["icc"] == pytest.approx(nc.icc(*by_seed)), metrics
+    assert metrics["icc"] == pytest.approx(fidelity.icc(*by_seed)), metrics
     assert metrics["icc"] > 0 and metrics["spearman"] > 0, metrics
     assert metrics["clears_baseline"] == pytest.approx(0.5), "the movers learn, no one else"
     assert set(movers) == {names[s] for s in MOVERS}

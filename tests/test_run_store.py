@@ -9,26 +9,34 @@ import math
 import shutil
 import subprocess
 import sys
-import typing
 from pathlib import Path
 
 import pandas as pd
 import pytest
 from numerics import assert_same_history
 
-from evo.retrain import Settings, SettingsJSON
 from evo.run.layout import RunLayout, TrainLayout
 from evo.run.records import (
     HISTORY_COLUMNS,
+    TRAINING_COLUMNS,
     HistoryRow,
+    RetrainSettings,
     RunSummary,
+    SweepTrial,
+    TrainingRow,
     TrainSummary,
     read_history,
+    read_retrain_settings,
     read_run_summary,
+    read_sweep_trial,
     read_train_summary,
+    read_trainings,
     write_history,
+    write_retrain_settings,
     write_run_summary,
+    write_sweep_trial,
     write_train_summary,
+    write_trainings,
 )
 from evo.run.store import RunStore
 
@@ -121,9 +129,29 @@ def test_each_record_round_trips_through_its_json_form() -> None:
             assert type(record)(**back) == record, f"{type(record).__name__} does not read back"
 
 
-def test_the_stored_settings_name_their_fields_in_order() -> None:
-    fields = [f.name for f in dataclasses.fields(Settings)]
-    assert list(typing.get_type_hints(SettingsJSON)) == fields, "SettingsJSON and Settings differ"
+def test_a_retraining_s_records_read_back(tmp_path: Path) -> None:
+    settings = RetrainSettings(("+exp=retrain",), 128, 2, 0, True, ("robot-00000001",),
+                               "learner: {}\n", first_seed=3, evaluate=True, confirm=2,
+                               labels=("snake",))
+    write_retrain_settings(tmp_path / "settings.json", settings)
+    assert read_retrain_settings(tmp_path / "settings.json") == settings
+    older = {k: v for k, v in settings.record().items()
+             if k not in ("first_seed", "evaluate", "confirm", "labels")}
+    (tmp_path / "older.json").write_text(json.dumps(older))
+    assert read_retrain_settings(tmp_path / "older.json") == dataclasses.replace(
+        settings, first_seed=None, evaluate=False, confirm=0, labels=()), "defaults"
+    row = TrainingRow("a_s0", "robot-00000001", "seed", "ppo", 0, 7, 128, -0.5, -0.4, 3, 128,
+                      1.5, 1.2, robot="snake", origin="designed", success_rate=0.5)
+    assert list(row.record()) == list(TRAINING_COLUMNS)
+    write_trainings(tmp_path / "trainings.csv", pd.DataFrame([row.record()]))
+    back = read_trainings(tmp_path / "trainings.csv")
+    pd.testing.assert_frame_equal(back.astype(object).fillna(""),  # "" reads back as NaN
+                                  pd.DataFrame([row.record()]).astype(object).fillna(""),
+                                  check_dtype=False)
+    trial = SweepTrial("spearman", 0.8, 20.0, 0.8, 0.7, 0.75, 3000.0, ("learner.lr=1e-3",))
+    write_sweep_trial(tmp_path / "trial.json", trial)
+    assert read_sweep_trial(tmp_path / "trial.json") == trial
+    assert read_sweep_trial(tmp_path / "missing.json") is None
 
 
 def test_the_layout_names_the_files_of_both_kinds_of_run(tmp_path: Path) -> None:

@@ -15,14 +15,18 @@ An evolution run directory (``task=evolve``)::
     evals/<name>.mcap/.rrd its recordings
     evals/<name>.log       the traceback of its evaluation, when an exception ended it
 
-A retraining of fixed structures (``+exp=retrain``, the noise ceiling: ``evo.retrain``)
-keeps ``config.yaml``, ``lock.json``, ``summary.json``, ``robots/`` and ``evals/`` and
-writes, instead of the state and history::
+A retraining of fixed structures (``+exp=retrain``, ``+exp=designer``: ``evo.retrain``)
+keeps ``config.yaml``, ``lock.json``, ``robots/`` and ``evals/`` and writes, instead of
+the state and history::
 
-    settings.json          what decides its numbers (``evo.retrain.Settings``)
-    trainings.csv          one row per finished training (``evo.retrain.TrainingRow``)
+    settings.json          what decides its numbers (``evo.run.records.RetrainSettings``)
+    trainings.csv          one row per finished training (``evo.run.records.TrainingRow``)
     progress.json          the wall time spent training, over every session
-    noise_ceiling.md/.csv/.png  the report, its metrics and its figure
+    trial.json             a noise sweep's trial: its objectives (``evo.sweep``)
+
+and the reports ``analysis`` writes from them: ``noise_ceiling.md/.csv/.png`` and
+``summary.json`` (``analysis.noise_ceiling``), ``comparison.md`` and its tables and
+figures (``analysis.designer``).
 
 A one-robot training (``+exp=train``) writes ``robot.json``, ``policy.pt``, ``curve.csv``
 and ``summary.json`` (``evo.run.records.TrainSummary``) instead. Code outside
@@ -32,6 +36,7 @@ spells a file name.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,6 +62,13 @@ PROGRESS = "progress.json"
 CEILING_REPORT = "noise_ceiling.md"
 CEILING_METRICS = "noise_ceiling.csv"
 CEILING_FIGURE = "noise_ceiling.png"
+TRIAL = "trial.json"
+
+
+def file_stem(label: str) -> str:
+    """``label`` as a file name's stem: characters other than letters, digits and
+    ``+-_.`` become ``_`` (a GA run's label may hold a ``/``)."""
+    return re.sub(r"[^A-Za-z0-9+_.-]", "_", label)
 TRAIN_ROBOT = "robot.json"
 TRAIN_POLICY = "policy.pt"
 TRAIN_CURVE = "curve.csv"
@@ -204,6 +216,11 @@ class RetrainLayout(RunLayout):
     def figure(self) -> Path:
         """``noise_ceiling.png``: fitness under one seed against another."""
         return self.root / CEILING_FIGURE
+
+    @property
+    def trial(self) -> Path:
+        """``trial.json``: a noise sweep trial's objectives and settings."""
+        return self.root / TRIAL
 
 
 @dataclass(frozen=True)

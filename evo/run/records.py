@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from evo.run.files import JSONObject, write_csv, write_json
+from evo.run.files import JSONObject, write_csv, write_json, write_text
 
 PARENT_SEPARATOR = ";"
 """Joins the parents' names in the ``parents`` cell of history.csv and state.json."""
@@ -370,3 +370,236 @@ def _read_json(path: Path) -> dict[str, Any] | None:
     except (OSError, json.JSONDecodeError) as err:
         raise ValueError(f"{path}: not readable JSON ({err})") from None
     return data if isinstance(data, dict) else None
+
+
+# ---------------------------------------------------------------- a retraining's files
+
+
+@dataclass(frozen=True)
+class RetrainSettings:
+    """What decides a retraining's numbers (``+exp=retrain``): its ``settings.json``.
+
+    Attributes:
+        overrides: The command's config overrides.
+        budget: Env steps per training.
+        seeds: Trainings per structure, each with its own seed.
+        root_seed: The root seed (of a random sample and of spawned training seeds).
+        baseline: Whether each structure is also trained once with the random learner.
+        structures: The structures' names, in the order planned.
+        config: The resolved config without the executor group (YAML).
+        first_seed: None: each training's seed is spawned from the root seed, the
+            structure and the replicate; an integer N: the trainings of a structure use
+            seeds N, N+1, ... as ``+exp=train seed=N`` does.
+        evaluate: Whether each training is followed by a deterministic evaluation.
+        confirm: Trainings under fresh seeds of the best structure of each origin.
+        labels: The structures' labels (a robot file's name, a GA run's), in order.
+    """
+
+    overrides: tuple[str, ...]
+    budget: int
+    seeds: int
+    root_seed: int
+    baseline: bool
+    structures: tuple[str, ...]
+    config: str
+    first_seed: int | None = None
+    evaluate: bool = False
+    confirm: int = 0
+    labels: tuple[str, ...] = ()
+
+    COMPARED = ("budget", "root_seed", "baseline", "first_seed", "evaluate", "config")
+    """What must match to continue a folder: the settings of every training in it. The
+    structures, the seeds per structure and the confirmation may change (a folder grows:
+    finished trainings are kept, and the others run), and so may the overrides that do
+    not change the resolved config (the executor's)."""
+
+    def record(self) -> JSONObject:
+        """The settings as ``settings.json`` holds them."""
+        data: JSONObject = dataclasses.asdict(self)
+        return data
+
+    @classmethod
+    def from_record(cls, data: Mapping[str, Any]) -> RetrainSettings:
+        """The settings of a ``settings.json`` (lists as tuples; keys that an older folder
+        lacks take their defaults, keys this version does not know are left out)."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        kept: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                                for k, v in data.items() if k in known}
+        return cls(**kept)
+
+
+def write_retrain_settings(path: Path, settings: RetrainSettings) -> Path:
+    """Write a retraining's ``settings.json`` (atomically)."""
+    return write_text(path, json.dumps(settings.record(), indent=2) + "\n")
+
+
+def read_retrain_settings(path: Path) -> RetrainSettings | None:
+    """A retraining's ``settings.json``; None when there is none.
+
+    Raises:
+        ValueError: Naming the file, when it does not parse as settings.
+    """
+    data = _read_json(path)
+    if data is None:
+        return None
+    try:
+        return RetrainSettings.from_record(data)
+    except TypeError as err:
+        raise ValueError(f"{path}: not a retraining's settings ({err})") from None
+
+
+def read_progress(path: Path) -> float:
+    """A retraining's ``progress.json``: the wall seconds spent training so far, over
+    every session (0 before the first training finished)."""
+    data = _read_json(path)
+    return 0.0 if data is None else float(data["wall_seconds"])
+
+
+def write_progress(path: Path, wall_seconds: float) -> Path:
+    """Write a retraining's ``progress.json`` (atomically)."""
+    return write_json(path, {"wall_seconds": wall_seconds})
+
+
+TRAINING_ROLES = ("seed", "baseline")
+"""``seed``: one of a structure's trainings under the learner; ``baseline``: its training
+with the random learner (the same network, never updated)."""
+
+
+@dataclass(frozen=True, slots=True)
+class TrainingRow:
+    """One finished training of a retraining: a row of ``trainings.csv``.
+
+    Attributes:
+        name: Unique name (its files are ``evals/<name>.*``).
+        structure: The robot's name (``robot-<hash8>``).
+        role: One of :data:`TRAINING_ROLES`.
+        learner: The learner's name.
+        replicate: Which of the structure's trainings (0-based; the confirmation's go on
+            after the others').
+        seed: Its seed.
+        budget: Its budget, env steps.
+        fitness: Eq. 8 over its episodes.
+        fitness_late: The mean return of the episodes completed after half the budget.
+        episodes: Episodes its fitness averages.
+        env_steps: Env steps it trained for.
+        wall_seconds: Its wall time.
+        cpu_seconds: Its process's CPU time (its cost, whatever else the machine ran).
+        robot: The structure's label (a robot file's name, a GA run's name, ...).
+        origin: Where the structure came from: ``random``, ``designed`` (a robot file),
+            ``evolved`` (a GA run's best) or ``population`` (a GA run's population).
+        method: The GA run's method (``E+L``, ...), or the origin for a structure of no run.
+        run: The GA run it came from ("" for none).
+        arena: The env's name.
+        success_rate: The deterministic evaluation's share of episodes that reached the
+            target (NaN without one).
+        eval_mean_return: Its mean return.
+        eval_time_to_target: Its mean simulated seconds to reach the target over the
+            episodes that did (NaN when none did).
+        eval_episodes: Its episodes (0 without one).
+        confirmation: Whether it is a confirmation's training (a fresh seed of a
+            structure chosen on the others).
+    """
+
+    name: str
+    structure: str
+    role: str
+    learner: str
+    replicate: int
+    seed: int
+    budget: int
+    fitness: float
+    fitness_late: float
+    episodes: int
+    env_steps: int
+    wall_seconds: float
+    cpu_seconds: float
+    robot: str = ""
+    origin: str = ""
+    method: str = ""
+    run: str = ""
+    arena: str = ""
+    success_rate: float = math.nan
+    eval_mean_return: float = math.nan
+    eval_time_to_target: float = math.nan
+    eval_episodes: int = 0
+    confirmation: bool = False
+
+    def record(self) -> JSONObject:
+        """The row as ``trainings.csv`` holds it."""
+        data: JSONObject = dataclasses.asdict(self)
+        return data
+
+
+TRAINING_COLUMNS = tuple(f.name for f in dataclasses.fields(TrainingRow))
+"""The columns of ``trainings.csv``, in order (a folder written before the columns after
+``cpu_seconds`` existed reads with them missing)."""
+
+
+def write_trainings(path: Path, table: pd.DataFrame) -> Path:
+    """Write ``trainings.csv`` (atomically) from a table of :data:`TRAINING_COLUMNS`."""
+    return write_csv(path, table[list(TRAINING_COLUMNS)])
+
+
+def read_trainings(path: Path) -> pd.DataFrame:
+    """``trainings.csv`` as a table of :data:`TRAINING_COLUMNS` and any others it has
+    (empty when there is none yet); a column an older folder lacks reads as missing
+    values."""
+    if not path.is_file():
+        return pd.DataFrame(columns=list(TRAINING_COLUMNS))
+    table = pd.read_csv(path)
+    return table.reindex(columns=[*table.columns, *(c for c in TRAINING_COLUMNS
+                                                    if c not in table.columns)])
+
+
+@dataclass(frozen=True, slots=True)
+class SweepTrial:
+    """What one trial of the noise sweep measured: its ``trial.json``.
+
+    Attributes:
+        objective: The agreement metric the sweep maximises.
+        value: Its value (the point estimate over the trial's structures).
+        core_seconds_per_robot: The trainings' mean CPU time, the cost minimised.
+        spearman: Spearman ρ between seeds.
+        icc: ICC(1).
+        top_quarter: Top-quarter agreement.
+        env_steps_per_second: Env steps over the trainings' wall time.
+        overrides: The trial's overrides (the command's and the sweeper's).
+    """
+
+    objective: str
+    value: float
+    core_seconds_per_robot: float
+    spearman: float
+    icc: float
+    top_quarter: float
+    env_steps_per_second: float
+    overrides: tuple[str, ...]
+
+    def values(self) -> tuple[float, float]:
+        """The two objectives Optuna is told: agreement (max) and cost (min)."""
+        return self.value, self.core_seconds_per_robot
+
+    def record(self) -> JSONObject:
+        """The trial as ``trial.json`` holds it."""
+        data: JSONObject = dataclasses.asdict(self)
+        return data
+
+
+def write_sweep_trial(path: Path, trial: SweepTrial) -> Path:
+    """Write a trial's ``trial.json`` (atomically)."""
+    return write_text(path, json.dumps(trial.record(), indent=2) + "\n")
+
+
+def read_sweep_trial(path: Path) -> SweepTrial | None:
+    """A trial's ``trial.json``; None when there is none.
+
+    Raises:
+        ValueError: Naming the file, when it is not a trial's.
+    """
+    data = _read_json(path)
+    if data is None:
+        return None
+    try:
+        return SweepTrial(**{**data, "overrides": tuple(data["overrides"])})
+    except (TypeError, KeyError) as err:
+        raise ValueError(f"{path}: not a noise sweep trial ({err})") from None
