@@ -42,7 +42,7 @@ from rich.table import Table
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 
-from evo.edge import compose_config, training_parts
+from evo.edge import compose_config, typed_config
 from evo.envs.reach import make_env
 from evo.learners.common import (
     GaussianHead,
@@ -112,8 +112,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)
-    parts = training_parts(compose_config(
-        ["+exp=paper_clean", f"env={args.arena}", *args.overrides]))
+    parts = typed_config(compose_config(
+        ["+exp=paper_clean", f"env={args.arena}", *args.overrides])).training
     config, physics = parts.learner, parts.physics
     env_config = dataclasses.replace(parts.env, nthread=args.nthread)
     robot = load_robot(args.robot)

@@ -44,7 +44,7 @@ from env_throughput import raw_rate  # bench/ is on sys.path when this script ru
 from rich.console import Console
 from rich.table import Table
 
-from evo.edge import TrainingParts, compose_config, training_parts
+from evo.edge import TrainingParts, compose_config, typed_config
 from evo.envs.reach import make_env
 from evo.learners.ppo import train
 from evo.learners.rollouts import evaluate_policy
@@ -162,7 +162,7 @@ def profile_by_library(run: Callable[[], object], title: str, top: int = 3) -> T
 
 def trained_with(arena: str, overrides: list[str]) -> TrainingParts:
     """What ``python evo/main.py +exp=train env=<arena> <overrides>`` trains with."""
-    return training_parts(compose_config(["+exp=train", f"env={arena}", *overrides]))
+    return typed_config(compose_config(["+exp=train", f"env={arena}", *overrides])).training
 
 
 def plot_curves(folder: Path) -> Path:

@@ -18,56 +18,83 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import types
 import typing
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, TypeVar
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 
 T = TypeVar("T")
 
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+"""The Hydra config tree (``conf/`` at the repository root)."""
+
 
 class ConfigError(ValueError):
     """A config value is missing, unknown or out of range; the message names the key."""
 
 
+def _number(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{key}: expected a number, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{key}: expected an integer, got {value!r}")
+    return value
+
+
+def _flag(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key}: expected true or false, got {value!r}")
+    return value
+
+
+def _text(value: Any, key: str) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"{key}: expected a string, got {value!r}")
+    return value
+
+
+SCALARS: dict[Any, Any] = {float: _number, int: _integer, bool: _flag, str: _text}
+"""The check and conversion of each scalar type a dataclass field may declare."""
+
+
+def _items(value: Any, hint: Any, key: str) -> tuple[Any, ...]:
+    """A list as the tuple a ``tuple[...]`` field declares, each item coerced."""
+    if not isinstance(value, list | tuple):
+        raise ConfigError(f"{key}: expected a list, got {value!r}")
+    args = typing.get_args(hint)
+    if len(args) > 1 and args[1] is not Ellipsis:  # tuple[int, float]: one hint each
+        if len(value) != len(args):
+            raise ConfigError(f"{key}: expected {len(args)} values, got {len(value)}")
+        hints = list(args)
+    else:  # tuple[int, ...]
+        hints = [args[0] if args else Any] * len(value)
+    return tuple(_coerce(v, h, f"{key}[{i}]") for i, (v, h) in enumerate(zip(value, hints,
+                                                                              strict=True)))
+
+
 def _coerce(value: Any, hint: Any, key: str) -> Any:
-    """Turn a plain config value into the type a dataclass field declares."""
+    """Turn a plain config value into the type a dataclass field declares: a dataclass,
+    a tuple, one of :data:`SCALARS`, or an optional one of them (``None`` or it)."""
     if isinstance(value, DictConfig | ListConfig):
         value = OmegaConf.to_container(value, resolve=True)
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
-        if isinstance(value, hint):
-            return value
-        return typed(hint, value, key)
-    origin = typing.get_origin(hint)
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise ConfigError(f"{key}: expected a list, got {value!r}")
-        args = typing.get_args(hint)
-        inner = args[0] if args else Any
-        if len(args) > 1 and args[1] is not Ellipsis:
-            if len(value) != len(args):
-                raise ConfigError(f"{key}: expected {len(args)} values, got {len(value)}")
-            return tuple(
-                _coerce(v, a, f"{key}[{i}]")
-                for i, (v, a) in enumerate(zip(value, args, strict=True))
-            )
-        return tuple(_coerce(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"{key}: expected a number, got {value!r}")
-        return float(value)
-    if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{key}: expected an integer, got {value!r}")
-        return value
-    if hint is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{key}: expected true or false, got {value!r}")
-        return value
-    if hint is str and not isinstance(value, str):
-        raise ConfigError(f"{key}: expected a string, got {value!r}")
-    return value
+        return value if isinstance(value, hint) else typed(hint, value, key)
+    if typing.get_origin(hint) is tuple:
+        return _items(value, hint, key)
+    if isinstance(hint, types.UnionType) and type(None) in typing.get_args(hint):
+        if value is None:
+            return None
+        inner = [a for a in typing.get_args(hint) if a is not type(None)]
+        return _coerce(value, inner[0], key) if len(inner) == 1 else value
+    check = SCALARS.get(hint)
+    return value if check is None else check(value, key)
 
 
 def typed(cls: type[T], node: DictConfig | Mapping[str, Any] | None, key: str) -> T:

@@ -1,38 +1,39 @@
-"""The config edge shared by ``evo/main.py``, the analysis tools and ``bench/``.
+"""The config edge: Hydra's config in, one typed root out (STYLE rule 1).
 
 ``python evo/main.py`` composes its config through ``@hydra.main``; a tool that trains
-robots the way a run does (``python -m analysis.noise_ceiling``, the benchmarks)
-composes the same ``conf/`` tree with the same overrides through :func:`compose_config`.
-Either way, the typed parts every training needs come from one place here, so a key
-is checked, and named in errors, the same way everywhere (STYLE rule 1); so do the
-noise ceiling's trainings (:func:`retraining`, for ``task=retrain``, its alias and the
-noise sweep's trials).
+robots the way a run does (the benchmarks, tests) composes the same ``conf/`` tree with
+the same overrides through :func:`compose_config`. Either way :func:`typed_config` turns
+it, once, into an :class:`EvoConfig`: every group typed (``evo.config.typed``), its older
+forms converted first (``evo.config.current``), so a key is checked, and named in
+errors, the same way everywhere. Below ``evo/main.py`` code takes the typed parts it
+needs; nothing there sees a ``DictConfig``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from evo.checks import at_least
 from evo.components.executors import EvalExecutor
-from evo.config import ConfigError, current, instantiate, typed
+from evo.components.ga import GAConfig
+from evo.config import CONF_DIR, ConfigError, current, instantiate, typed
 from evo.envs.params import EnvConfig
+from evo.evaluation import Job
 from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
+from evo.retrain import RetrainConfig, Retraining, load_entries, open_folder
 from evo.robot import GeneratorParams, Limits
 from evo.robot.builder import PhysicsParams
-
-if TYPE_CHECKING:
-    from evo.retrain import RetrainConfig, Retraining
-
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-"""The Hydra config tree (``conf/`` at the repository root)."""
+from evo.run.layout import RunLayout
+from evo.run.records import RetrainSettings
+from evo.sweep import SweepSettings
 
 
 def compose_config(overrides: Sequence[str]) -> DictConfig:
@@ -62,45 +63,161 @@ class TrainingParts:
     record: RecordConfig
 
 
-def physics_of(cfg: DictConfig) -> PhysicsParams:
-    """``morphology.physics``: the module constants."""
-    return typed(PhysicsParams, cfg.morphology.physics, "morphology.physics")
+@dataclass(frozen=True, slots=True)
+class RobotsTask:
+    """``robots``: what ``task=robots`` draws.
+
+    Attributes:
+        count: How many random robots to generate.
+        render: Also write a picture of each (needs ``MUJOCO_GL=egl`` or ``osmesa``).
+    """
+
+    count: int = 12
+    render: bool = True
+
+    def __post_init__(self) -> None:
+        at_least(self, 1, "count")
 
 
-def env_of(cfg: DictConfig) -> EnvConfig:
-    """``env``: the arena and the task."""
-    return typed(EnvConfig, cfg.env, "env")
+@dataclass(frozen=True)
+class EvoConfig:
+    """The whole config of ``evo/main.py``, typed: what a task is given.
+
+    Attributes:
+        task: What ``evo/main.py`` does (``evolve``, ``train``, ``retrain``, ...).
+        seed: The root seed; every random stream of the run is spawned from it.
+        torch_threads: Torch's intra-op threads of this process.
+        robot: ``task=train``/``evaluate``: the robot file.
+        checkpoint: ``task=evaluate``: the policy checkpoint.
+        resume: The run directory to continue, if any.
+        physics: ``morphology.physics``: the module constants.
+        limits: ``morphology.limits``: what a valid robot may not exceed.
+        generator: ``morphology.generator``: random generation of robots.
+        env: ``env``: the arena and the task.
+        learner: ``learner``: the inner loop.
+        record: ``record``: the recordings.
+        ga: ``ga``: the outer loop.
+        robots: ``robots``: what ``task=robots`` draws.
+        retrain: ``retrain``: what ``task=retrain`` trains (None without the node).
+        noise_sweep: ``noise_sweep``: one sweep trial (None without the node).
+        executor: The ``executor`` node, checked; :meth:`make_executor` builds it (a
+            local Ray instance starts then).
+        yaml: The resolved config, as ``config.yaml`` holds it.
+        training_yaml: The resolved config without the executor group (which decides
+            where trainings run, not their numbers).
+    """
+
+    task: str
+    seed: int
+    torch_threads: int
+    robot: str | None
+    checkpoint: str | None
+    resume: str | None
+    physics: PhysicsParams
+    limits: Limits
+    generator: GeneratorParams
+    env: EnvConfig
+    learner: LearnerConfig
+    record: RecordConfig
+    ga: GAConfig
+    robots: RobotsTask
+    retrain: RetrainConfig | None
+    noise_sweep: SweepSettings | None
+    executor: Mapping[str, Any]
+    yaml: str
+    training_yaml: str
+
+    @property
+    def training(self) -> TrainingParts:
+        """The physics, env, learner and record groups: what one training needs."""
+        return TrainingParts(self.physics, self.env, self.learner, self.record)
+
+    def make_executor(self) -> EvalExecutor:
+        """The ``executor`` group's executor (a local Ray instance starts here)."""
+        executor: EvalExecutor = instantiate(self.executor, "executor")
+        return executor
 
 
-def limits_of(cfg: DictConfig) -> Limits:
-    """``morphology.limits``: what a valid robot may not exceed."""
-    return typed(Limits, cfg.morphology.limits, "morphology.limits")
+def _seed(value: object) -> int:
+    """The root seed: a non-negative integer (numpy's seed sequences take no other)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ConfigError(f"seed: expected a non-negative integer, got {value!r}")
+    return value
 
 
-def generator_of(cfg: DictConfig) -> GeneratorParams:
-    """``morphology.generator``: random generation of robots."""
-    return typed(GeneratorParams, cfg.morphology.generator, "morphology.generator")
+def _threads(value: object) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ConfigError(f"torch_threads: expected a positive integer, got {value!r}")
+    return value
 
 
-def training_parts(cfg: DictConfig) -> TrainingParts:
-    """The physics, env, learner and record groups of ``cfg``, typed.
+def _path(value: object) -> str | None:
+    return None if value is None else str(value)
+
+
+def typed_config(cfg: DictConfig) -> EvoConfig:
+    """``cfg`` (a composed config, or a run directory's ``config.yaml``) in today's form
+    (:func:`evo.config.current`), every group typed: the one place it is unpacked.
 
     Raises:
         ConfigError: naming the key of the first bad value.
     """
     cfg = current(cfg)
-    return TrainingParts(
-        physics=physics_of(cfg),
-        env=env_of(cfg),
-        learner=typed(LearnerConfig, cfg.learner, "learner"),
-        record=typed(RecordConfig, cfg.record, "record"),
+    morphology = cfg.get("morphology") or {}
+    executor = cfg.get("executor")
+    plain = OmegaConf.to_container(executor, resolve=True) if executor is not None else None
+    if not isinstance(plain, dict) or "_target_" not in plain:
+        raise ConfigError("executor: expected a mapping with a _target_ class")
+
+    def optional(cls: type[Any], key: str) -> Any:
+        node = cfg.get(key)
+        return None if node is None else typed(cls, node, key)
+
+    return EvoConfig(
+        task=str(cfg.get("task", "evolve")), seed=_seed(cfg.get("seed", 0)),
+        torch_threads=_threads(cfg.get("torch_threads", 1)),
+        robot=_path(cfg.get("robot")), checkpoint=_path(cfg.get("checkpoint")),
+        resume=_path(cfg.get("resume")),
+        physics=typed(PhysicsParams, morphology.get("physics"), "morphology.physics"),
+        limits=typed(Limits, morphology.get("limits"), "morphology.limits"),
+        generator=typed(GeneratorParams, morphology.get("generator"), "morphology.generator"),
+        env=typed(EnvConfig, cfg.get("env"), "env"),
+        learner=typed(LearnerConfig, cfg.get("learner"), "learner"),
+        record=typed(RecordConfig, cfg.get("record"), "record"),
+        ga=typed(GAConfig, cfg.get("ga"), "ga"),
+        robots=typed(RobotsTask, cfg.get("robots"), "robots"),
+        retrain=optional(RetrainConfig, "retrain"),
+        noise_sweep=optional(SweepSettings, "noise_sweep"),
+        executor={str(k): v for k, v in plain.items()},
+        yaml=OmegaConf.to_yaml(cfg, resolve=True),
+        training_yaml=_without_executor(cfg),
     )
 
 
-def executor_of(cfg: DictConfig) -> EvalExecutor:
-    """The ``executor`` group's executor (a local Ray instance starts here)."""
-    executor: EvalExecutor = instantiate(cfg.executor, "executor")
-    return executor
+def _without_executor(cfg: DictConfig) -> str:
+    """``cfg`` resolved, without the executor group: a retraining's
+    :attr:`~evo.run.records.RetrainSettings.config`."""
+    kept = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(kept, dict)
+    kept.pop("executor", None)
+    return OmegaConf.to_yaml(OmegaConf.create(kept))
+
+
+def run_config(run_dir: Path) -> EvoConfig:
+    """The typed config a run directory was started with (its ``config.yaml``, in
+    today's form).
+
+    Raises:
+        ValueError: When the directory has no ``config.yaml``.
+        ConfigError: For a value the config no longer accepts (named).
+    """
+    path = RunLayout(run_dir).config
+    if not path.is_file():
+        raise ValueError(f"{path} not found; is {run_dir} an evo run directory?")
+    loaded = OmegaConf.load(path)
+    if not isinstance(loaded, DictConfig):
+        raise ValueError(f"{path}: not a config (a mapping)")
+    return typed_config(loaded)
 
 
 def warn_if_failures_cannot_end(
@@ -129,15 +246,6 @@ def warn_if_failures_cannot_end(
         )
 
 
-def settings_config(cfg: DictConfig) -> str:
-    """``cfg`` resolved, without the executor group (which decides where trainings run,
-    not their numbers): a noise ceiling's ``evo.retrain.Settings.config``."""
-    kept = OmegaConf.to_container(cfg, resolve=True)
-    assert isinstance(kept, dict)
-    kept.pop("executor", None)
-    return OmegaConf.to_yaml(OmegaConf.create(kept))
-
-
 def what_trains(config: str) -> tuple[object, ...] | None:
     """The typed groups of a resolved config (YAML) that decide a training's result
     (physics, env, learner, robot generation and limits), defaults filled in; None if it
@@ -145,15 +253,15 @@ def what_trains(config: str) -> tuple[object, ...] | None:
     try:
         cfg = OmegaConf.create(config)
         assert isinstance(cfg, DictConfig)
-        parts = training_parts(cfg)
-        return parts.physics, parts.env, parts.learner, generator_of(cfg), limits_of(cfg)
+        root = typed_config(cfg)
     except Exception:  # noqa: BLE001 - any unreadable config differs from a readable one
         return None
+    return root.physics, root.env, root.learner, root.generator, root.limits
 
 
-def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: int,
+def retraining(root: EvoConfig, out: Path, config: RetrainConfig, *, root_seed: int,
                overrides: Sequence[str]) -> Retraining:
-    """The trainings of ``config`` under ``cfg`` (``evo.retrain``): settings and folder
+    """The trainings of ``config`` under ``root`` (``evo.retrain``): settings and folder
     checked, ``settings.json`` stored (the folder is created if needed); nothing is
     trained yet.
 
@@ -161,45 +269,35 @@ def retraining(cfg: DictConfig, out: Path, config: RetrainConfig, *, root_seed: 
         evo.retrain.RetrainError: For bad robots or a folder of other settings (named).
         ConfigError: For a config that cannot train (its key named).
     """
-    from evo.evaluation import Job
-    from evo.retrain import Retraining, load_entries, open_folder
-    from evo.run.records import RetrainSettings
-
-    parts = training_parts(cfg)
-    budget = parts.learner.total_steps if config.budget is None else config.budget
-    entries = load_entries(config, root_seed, generator=generator_of(cfg),
-                           limits=limits_of(cfg))
-    baseline = config.baseline and parts.learner.update
+    learner = root.learner
+    budget = learner.total_steps if config.budget is None else config.budget
+    entries = load_entries(config, root_seed, generator=root.generator, limits=root.limits)
     settings = RetrainSettings(
-        tuple(overrides), budget, config.seeds, root_seed, baseline,
-        tuple(e.robot.name for e in entries), settings_config(cfg),
+        tuple(overrides), budget, config.seeds, root_seed, config.baseline and learner.update,
+        tuple(e.robot.name for e in entries), root.training_yaml,
         first_seed=config.first_seed, evaluate=config.evaluate, confirm=config.confirm,
         labels=tuple(e.label for e in entries))
     open_folder(out, settings, what_trains)
-    warn_if_failures_cannot_end(budget, "retrain.budget", parts.learner, parts.env)
-    episodes = parts.learner.eval_episodes if config.evaluate else 0
+    warn_if_failures_cannot_end(budget, "retrain.budget", learner, root.env)
+    episodes = learner.eval_episodes if config.evaluate else 0
     # The random learner ("random"): the same network, never updated.
-    random_learner = dataclasses.replace(parts.learner, update=False)
-    jobs = {role: Job(parts.physics, parts.env, learner, str(out), learner.name,
-                      record=parts.record, config_yaml=settings.config,
-                      eval_episodes=episodes)
-            for role, learner in (("seed", parts.learner), ("baseline", random_learner))}
-    return Retraining(out, settings, tuple(entries), jobs, parts.env.name)
+    random_learner = dataclasses.replace(learner, update=False)
+    jobs = {role: Job(root.physics, root.env, trains, str(out), trains.name,
+                      record=root.record, config_yaml=settings.config, eval_episodes=episodes)
+            for role, trains in (("seed", learner), ("baseline", random_learner))}
+    return Retraining(out, settings, tuple(entries), jobs, root.env.name)
 
 
 __all__ = [
     "CONF_DIR",
     "ConfigError",
+    "EvoConfig",
+    "RobotsTask",
     "TrainingParts",
     "compose_config",
-    "env_of",
-    "executor_of",
-    "generator_of",
-    "limits_of",
-    "physics_of",
     "retraining",
-    "settings_config",
-    "training_parts",
+    "run_config",
+    "typed_config",
     "warn_if_failures_cannot_end",
     "what_trains",
 ]

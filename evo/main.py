@@ -43,6 +43,7 @@ from omegaconf import DictConfig, OmegaConf
 from evo.components.executors import EvalExecutor
 from evo.components.ga import GAConfig, StructureStrategy
 from evo.config import (
+    CONF_DIR,
     ConfigError,
     current,
     method_label,
@@ -50,16 +51,7 @@ from evo.config import (
     structure_letter,
     typed,
 )
-from evo.edge import (
-    CONF_DIR,
-    executor_of,
-    generator_of,
-    limits_of,
-    physics_of,
-    retraining,
-    training_parts,
-    warn_if_failures_cannot_end,
-)
+from evo.edge import EvoConfig, retraining, typed_config, warn_if_failures_cannot_end
 from evo.evaluation import Candidate, Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.fidelity import agreement, ceiling_line
@@ -90,53 +82,72 @@ from evo.run.store import RunStore, SavedState
 from evo.sweep import trial_overrides
 
 
-def _robot(cfg: DictConfig) -> Robot:
+@dataclass(frozen=True)
+class Run:
+    """What a task is given: the typed config it runs with and its run directory.
+
+    Attributes:
+        config: The config, typed once (:func:`evo.edge.typed_config`): the command's,
+            or with ``resume=DIR`` the one DIR was started with.
+        out: The run directory.
+        lock: Its lock, held by this process.
+        resuming: Whether ``resume=DIR`` continues the run in ``out``.
+        started_ga: With ``resume=DIR ga.robot_budget=N``, the ``ga`` group the run was
+            started with (``config.ga`` has the new budget; :func:`check_robot_budget`).
+    """
+
+    config: EvoConfig
+    out: Path
+    lock: RunLock
+    resuming: bool = False
+    started_ga: GAConfig | None = None
+
+
+def _robot(config: EvoConfig) -> Robot:
     """The robot named by ``robot=``; a missing key or bad file is a ``ConfigError``."""
-    if cfg.robot is None:
+    if config.robot is None:
         raise ConfigError("robot: give the robot to use, e.g. robot=robots/four_wheeler.json")
     try:
-        return load_robot(str(cfg.robot), limits_of(cfg))
+        return load_robot(config.robot, config.limits)
     except (RobotFileError, InvalidRobotError) as err:
         raise ConfigError(f"robot: {err}") from None
 
 
-def run_robots(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+def run_robots(run: Run) -> None:
     """Generate, save and picture ``robots.count`` random robots."""
     from evo.robot.gallery import write_gallery
 
-    count = int(cfg.robots.count)
-    if count < 1:
-        raise ConfigError(f"robots.count: expected a positive integer, got {count}")
-    rng = np.random.default_rng(int(cfg.seed))
+    config = run.config
+    rng = np.random.default_rng(config.seed)
     try:
-        robots = random_robots(rng, count, generator_of(cfg), limits_of(cfg))
+        robots = random_robots(rng, config.robots.count, config.generator, config.limits)
     except ValueError as err:
         raise ConfigError(f"robots.count: {err}") from None
-    write_gallery(robots, RunLayout(out).robots, physics_of(cfg), bool(cfg.robots.render))
+    write_gallery(robots, RunLayout(run.out).robots, config.physics, config.robots.render)
 
 
-def run_train(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+def run_train(run: Run) -> None:
     """Train one robot and evaluate it (``+exp=train``)."""
     from evo.learners.session import train_robot
 
-    parts = training_parts(cfg)
-    learner = parts.learner
-    warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, parts.env)
-    train_robot(_robot(cfg), parts, seed=int(cfg.seed), out=out)
+    config = run.config
+    learner = config.learner
+    warn_if_failures_cannot_end(learner.total_steps, "learner.total_steps", learner, config.env)
+    train_robot(_robot(config), config.training, seed=config.seed, out=run.out)
 
 
-def run_evaluate(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+def run_evaluate(run: Run) -> None:
     """Evaluate a trained policy deterministically (``+exp=evaluate``)."""
     from evo.learners.session import evaluate_robot
 
-    if cfg.checkpoint is None:
+    config = run.config
+    if config.checkpoint is None:
         raise ConfigError(
             "checkpoint: give the policy to run, e.g. checkpoint=outputs/.../policy.pt"
         )
-    parts = training_parts(cfg)
     try:
-        evaluate_robot(_robot(cfg), Path(str(cfg.checkpoint)), parts, seed=int(cfg.seed),
-                       out=out)
+        evaluate_robot(_robot(config), Path(config.checkpoint), config.training,
+                       seed=config.seed, out=run.out)
     except ValueError as err:
         raise ConfigError(f"checkpoint: {err}") from None
 
@@ -160,23 +171,19 @@ class EvolveParts:
     executor: EvalExecutor
 
 
-def evolve_parts(cfg: DictConfig, out: Path) -> EvolveParts:
+def evolve_parts(config: EvoConfig, out: Path) -> EvolveParts:
     """Build and check everything ``task=evolve`` needs, before anything runs.
 
     Raises:
         ConfigError: naming the key of the first bad value.
     """
-    cfg = current(cfg)
-    parts = training_parts(cfg)
-    learner = parts.learner
-    ga = typed(GAConfig, cfg.ga, "ga")
-    strategy = ga.strategy(generator_of(cfg), limits_of(cfg))
+    learner, ga = config.learner, config.ga
+    strategy = ga.strategy(config.generator, config.limits)
     method = method_label(strategy.code, learner.update, ga.inheritance)
-    job = Job(parts.physics, parts.env, learner, str(out), method, record=parts.record,
-              config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-              timeout_s=ga.eval_timeout_s, early=ga.early_rejection)
+    job = Job(config.physics, config.env, learner, str(out), method, record=config.record,
+              config_yaml=config.yaml, timeout_s=ga.eval_timeout_s, early=ga.early_rejection)
     warn_if_failures_cannot_end(min(ga.expected_budgets()), "ga.schedule", learner, job.env)
-    executor = executor_of(cfg)  # last: Ray starts here
+    executor = config.make_executor()  # last: Ray starts here
     return EvolveParts(ga, strategy, job, executor)
 
 
@@ -220,42 +227,37 @@ EVO_CODE = EvolveCode()
 """evo's own code of ``task=evolve``."""
 
 
-def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO_CODE) -> None:
+def run_evolve(run: Run, code: EvolveCode = EVO_CODE) -> None:
     """The GA (``+exp=smoke``, ``demo``, ``paper_clean``, ...); ``resume=DIR`` continues.
 
     Everything is checked before anything is written: the config, and when the
     directory holds a run, its saved state (:meth:`evo.run.store.RunStore.load`) and a
-    new ``ga.robot_budget`` given with ``resume=`` (:func:`with_robot_budget`). A
+    new ``ga.robot_budget`` given with ``resume=`` (:func:`check_robot_budget`). A
     resume that fails leaves the directory as it was. ``code`` makes the store, the
     run's log and the evaluations.
     """
     from evo.progress import evolution_progress, print_summary
 
-    resuming = cfg.resume is not None
-    given = cfg
-    if resuming:
-        cfg = _resumed_config(Path(str(cfg.resume)), takes=(ROBOT_BUDGET,))
-        check_seed(cfg)
+    config, out = run.config, run.out
     store = code.store(out)
-    saved = _state_to_continue(store, resuming)
-    started = cfg
-    if resuming and _given(ROBOT_BUDGET):
-        cfg = with_robot_budget(cfg, given.ga.robot_budget, saved)
-    saved, dropped = _ending_at_budget(saved, cfg, out)
-    parts = keeping_its_method(evolve_parts(cfg, out), saved)
-    if resuming:
-        lock.claim()
-        if cfg.ga.robot_budget != started.ga.robot_budget:
-            _write_config(cfg, out, replacing=True)
-            print(f"{out}: {ROBOT_BUDGET} changed from {started.ga.robot_budget} to "
-                  f"{cfg.ga.robot_budget} robots")
+    saved = _state_to_continue(store, run.resuming)
+    if run.started_ga is not None:
+        check_robot_budget(run.started_ga, config.ga, saved)
+    saved, dropped = _ending_at_budget(saved, config.ga.robot_budget, out)
+    parts = keeping_its_method(evolve_parts(config, out), saved)
+    if run.resuming:
+        run.lock.claim()
+        if run.started_ga is not None and run.started_ga.robot_budget != config.ga.robot_budget:
+            _write_config(config.yaml, out, replacing=True)
+            print(f"{out}: {ROBOT_BUDGET} changed from {run.started_ga.robot_budget} to "
+                  f"{config.ga.robot_budget} robots")
     budgets = parts.ga.expected_budgets()
     log: RunLog | None = None
     evolution: Evolution | None = None
     try:
         with critical():  # opened whole, so the finally below can close it
             log = code.run_log(store, parts.job.record, {
-                "config": parts.job.config_yaml, "seed": int(cfg.seed),
+                "config": parts.job.config_yaml, "seed": config.seed,
                 "method": parts.job.method, "name": out.name})
         with evolution_progress(budgets, parts.job.method) as show:
 
@@ -265,11 +267,11 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
                 log(row)
 
             evolution = Evolution(store, ga=parts.ga, strategy=parts.strategy, job=parts.job,
-                                  executor=parts.executor, seed=int(cfg.seed),
+                                  executor=parts.executor, seed=config.seed,
                                   on_result=on_result, evaluate=code.evaluate)
             if saved is not None:
                 evolution.resume(saved)  # saved: the state without the robots dropped
-                _discard(store, dropped, int(cfg.ga.robot_budget))
+                _discard(store, dropped, config.ga.robot_budget)
                 show.resumed(evolution.history)
                 for row in evolution.history:
                     log(row)
@@ -282,14 +284,14 @@ def run_evolve(cfg: DictConfig, out: Path, lock: RunLock, code: EvolveCode = EVO
     print_summary(summary, out)
 
 
-def _ending_at_budget(saved: SavedState | None, cfg: DictConfig, out: Path
+def _ending_at_budget(saved: SavedState | None, robot_budget: int, out: Path
                       ) -> tuple[SavedState | None, list[Candidate]]:
-    """``saved`` for a run of ``cfg.ga.robot_budget`` robots, and the robots in flight it
-    drops (:meth:`SavedState.ending_at`); a clear ``ConfigError`` if it cannot be one."""
+    """``saved`` for a run of ``robot_budget`` robots, and the robots in flight it drops
+    (:meth:`SavedState.ending_at`); a clear ``ConfigError`` if it cannot be one."""
     if saved is None:
         return None, []
     try:
-        return saved.ending_at(int(cfg.ga.robot_budget))
+        return saved.ending_at(robot_budget)
     except ValueError as err:
         raise ConfigError(f"{RunLayout(out).state}: {err}") from None
 
@@ -340,23 +342,18 @@ def _saved_state(store: RunStore) -> SavedState:
         raise ConfigError(f"resume: {err}") from None
 
 
-def with_robot_budget(cfg: DictConfig, robot_budget: object,
-                      saved: SavedState | None) -> DictConfig:
-    """``cfg`` (a resumed run's) with ``ga.robot_budget`` set to ``robot_budget``
-    (``resume=DIR ga.robot_budget=N``): the run ends at N robots, before or after the
-    end it was started with; at the robots already evaluated, it ends at once, and the
-    robots in flight born at N or later are dropped (:meth:`SavedState.ending_at`).
+def check_robot_budget(started: GAConfig, ga: GAConfig, saved: SavedState | None) -> None:
+    """Whether a resumed run started with ``started`` may end at ``ga.robot_budget``
+    instead (``resume=DIR ga.robot_budget=N``): before or after the end it was started
+    with; at the robots already evaluated, it ends at once, and the robots in flight
+    born at N or later are dropped (:meth:`SavedState.ending_at`).
 
     Raises:
-        ConfigError: N is not a valid ``ga.robot_budget`` (:class:`GAConfig`), is not
-            above the birth of every robot already evaluated (``saved``), or would give
-            one of the robots it keeps another training budget: ``ga.schedule`` may
-            depend on ``ga.robot_budget``, and the robots of one run are those of a run
-            of N.
+        ConfigError: N is not above the birth of every robot already evaluated
+            (``saved``), or would give one of the robots it keeps another training
+            budget: ``ga.schedule`` may depend on ``ga.robot_budget``, and the robots of
+            one run are those of a run of N.
     """
-    new = copy.deepcopy(cfg)
-    new.ga.robot_budget = robot_budget
-    old, ga = typed(GAConfig, cfg.ga, "ga"), typed(GAConfig, new.ga, "ga")
     history = saved.history if saved is not None else []
     evaluated = max((row.birth for row in history), default=-1) + 1
     if ga.robot_budget < evaluated:
@@ -365,27 +362,18 @@ def with_robot_budget(cfg: DictConfig, robot_budget: object,
             f"which it cannot un-evaluate; expected at least {evaluated}, got "
             f"{ga.robot_budget}")
     kept = min(saved.next_birth if saved is not None else 0, ga.robot_budget)
-    was, now = old.budgets()[:kept], ga.budgets()[:kept]
+    was, now = started.budgets()[:kept], ga.budgets()[:kept]
     changed = [b for b in range(kept) if was[b] != now[b]]
     if changed:
         b = changed[0]
         raise ConfigError(
             f"{ROBOT_BUDGET}: ga.schedule (initial {ga.schedule.initial}, first "
             f"{ga.schedule.first}, last {ga.schedule.last}) depends on {ROBOT_BUDGET}, so "
-            f"{ga.robot_budget} instead of {old.robot_budget} would give robot {b}, already "
-            f"born, {now[b]} env steps instead of {was[b]} ({len(changed)} of the {kept} "
-            f"born would change): the robots evaluated and those to come would not be one "
-            f"run of {ga.robot_budget} robots; keep {ROBOT_BUDGET}={old.robot_budget} (a "
-            f"schedule with first = last takes any)")
-    return new
-
-
-def check_seed(cfg: DictConfig) -> int:
-    """The root seed: a non-negative integer (numpy's seed sequences take no other)."""
-    seed = cfg.seed
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ConfigError(f"seed: expected a non-negative integer, got {seed!r}")
-    return seed
+            f"{ga.robot_budget} instead of {started.robot_budget} would give robot {b}, "
+            f"already born, {now[b]} env steps instead of {was[b]} ({len(changed)} of the "
+            f"{kept} born would change): the robots evaluated and those to come would not be "
+            f"one run of {ga.robot_budget} robots; keep {ROBOT_BUDGET}={started.robot_budget} "
+            "(a schedule with first = last takes any)")
 
 
 ROBOT_BUDGET = "ga.robot_budget"
@@ -399,9 +387,9 @@ def _given(key: str) -> bool:
 
 
 def _resumed_config(run_dir: Path, takes: tuple[str, ...] = ()) -> DictConfig:
-    """The resolved config a run directory was started with, in today's form
-    (:func:`evo.config.current`: a run of an older evo resumes). The command line may
-    set only the keys in ``takes`` besides ``resume=``; the caller applies them."""
+    """The resolved config a run directory was started with (:func:`evo.edge.typed_config`
+    reads an older evo's in today's form). The command line may set only the keys in
+    ``takes`` besides ``resume=``; the caller applies them."""
     path = RunLayout(run_dir).config
     if not path.is_file():
         raise ConfigError(f"resume: {path} not found; is {run_dir} an evo run directory?")
@@ -416,21 +404,20 @@ def _resumed_config(run_dir: Path, takes: tuple[str, ...] = ()) -> DictConfig:
     loaded = OmegaConf.load(path)
     assert isinstance(loaded, DictConfig)
     loaded.resume = None
-    return current(loaded)
+    return loaded
 
 
-def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None, *,
+def _write_config(text: str, out: Path, lock: RunLock | None = None, *,
                   replacing: bool = False) -> None:
-    """Save the resolved config in the run directory (after ``lock.claim()``).
+    """Save the resolved config ``text`` in the run directory (after ``lock.claim()``).
 
     A directory that already holds an evolution state (the same command run again, e.g.
     a requeued cluster job or a stopped sweep started again with the same
     ``hydra.sweep.dir``) is continued only when the config is the same; anything else
     would mix two runs in one directory, and is refused before anything is written.
     ``replacing`` writes over it: the config of a resumed run, changed as ``resume=``
-    allows (:func:`with_robot_budget`).
+    allows (:func:`check_robot_budget`).
     """
-    text = OmegaConf.to_yaml(cfg, resolve=True)
     layout = RunLayout(out)
     path = layout.config
     if (not replacing and layout.state.exists() and path.is_file()
@@ -444,52 +431,55 @@ def _write_config(cfg: DictConfig, out: Path, lock: RunLock | None = None, *,
     write_text(path, text)
 
 
-def run_noise_sweep(cfg: DictConfig, out: Path, lock: RunLock) -> tuple[float, float]:
+def run_noise_sweep(run: Run) -> tuple[float, float]:
     """One trial of ``+exp=noise_sweep`` (``evo.sweep``): the retraining of the sweep's
     fixed sample under the trial's config; returns its agreement between seeds and
     core-seconds per robot to the Optuna sweeper."""
     from evo.sweep import SweepSettings, record_trial, trial_result
 
-    sweep = typed(SweepSettings, cfg.get("noise_sweep"), "noise_sweep")
-    config = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
-                           baseline=False)
+    config = run.config
+    sweep = config.noise_sweep if config.noise_sweep is not None else SweepSettings()
+    retrain = RetrainConfig(random=sweep.robots, seeds=sweep.seeds, budget=sweep.budget,
+                            baseline=False)
     overrides = trial_overrides()
     try:
-        retrain = retraining(cfg, out, config, root_seed=sweep.robot_seed, overrides=overrides)
+        retraining_ = retraining(config, run.out, retrain, root_seed=sweep.robot_seed,
+                                 overrides=overrides)
     except RetrainError as err:
         raise ConfigError(f"noise_sweep: {err}") from None
-    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
-    return record_trial(out, trial_result(trainings, sweep, overrides, out)).values()
+    trainings = run_trainings(retraining_, EvaluationPool(config.make_executor()))
+    return record_trial(run.out, trial_result(trainings, sweep, overrides, run.out)).values()
 
 
-def run_retrain(cfg: DictConfig, out: Path, lock: RunLock) -> None:
+def run_retrain(run: Run) -> None:
     """Train fixed structures under independent seeds (``+exp=retrain``, the noise
     ceiling; ``+exp=designer``, the designer comparison): ``evo.retrain``.
     ``resume=DIR`` continues, reusing the finished trainings (so does the same command
     run again). ``config.yaml`` is written once the folder is known to hold no
     trainings of other settings. The reports are ``analysis``'s."""
-    resuming = cfg.resume is not None
-    if resuming:
-        cfg = _resumed_config(Path(str(cfg.resume)))
-    config = typed(RetrainConfig, cfg.get("retrain"), "retrain")
+    config, out = run.config, run.out
+    if config.retrain is None:
+        raise ConfigError("retrain: no structures to train; start from +exp=retrain or "
+                          "+exp=designer")
     try:
-        stored = read_retrain_settings(RetrainLayout(out).settings) if resuming else None
+        stored = read_retrain_settings(RetrainLayout(out).settings) if run.resuming else None
         overrides = stored.overrides if stored is not None else trial_overrides()
-        retrain = retraining(cfg, out, config, root_seed=check_seed(cfg), overrides=overrides)
+        retraining_ = retraining(config, out, config.retrain, root_seed=config.seed,
+                                 overrides=overrides)
     except (RetrainError, ValueError) as err:  # ValueError: an unreadable settings.json
         raise ConfigError(str(err)) from None
-    if resuming:
-        lock.claim()
+    if run.resuming:
+        run.lock.claim()
     else:
-        _write_config(cfg, out, lock)
-    trainings = run_trainings(retrain, EvaluationPool(executor_of(cfg)))
-    if not config.evaluate:
+        _write_config(config.yaml, out, run.lock)
+    trainings = run_trainings(retraining_, EvaluationPool(config.make_executor()))
+    if not config.retrain.evaluate:
         print(f"noise ceiling: {ceiling_line(agreement(trainings))}")
-    report = "analysis.designer" if config.evaluate else "analysis.noise_ceiling"
+    report = "analysis.designer" if config.retrain.evaluate else "analysis.noise_ceiling"
     print(f"{len(trainings)} trainings in {out}; report: python -m {report} {out}")
 
 
-TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
+TASKS: dict[str, Callable[[Run], object]] = {
     "evolve": run_evolve,
     "robots": run_robots,
     "train": run_train,
@@ -497,6 +487,33 @@ TASKS: dict[str, Callable[[DictConfig, Path, RunLock], object]] = {
     "noise_sweep": run_noise_sweep,
     "retrain": run_retrain,
 }
+RESUMABLE = ("evolve", "retrain")
+"""The tasks ``resume=DIR`` continues."""
+WRITES_ITS_CONFIG = ("retrain",)
+"""The tasks that write ``config.yaml`` themselves, once their folder is checked."""
+
+
+def start(cfg: DictConfig, name: str, out: Path, lock: RunLock) -> Run:
+    """The run of task ``name``: ``cfg`` typed once, or with ``resume=DIR`` the config
+    DIR was started with (an evolution's with the new ``ga.robot_budget`` given); a
+    new run's ``config.yaml`` written.
+
+    Raises:
+        ConfigError: naming the key of the first bad value.
+    """
+    if cfg.resume is None:
+        config = typed_config(cfg)
+        if name not in WRITES_ITS_CONFIG:
+            _write_config(config.yaml, out, lock)
+        return Run(config, out, lock)
+    takes = (ROBOT_BUDGET,) if name == "evolve" else ()
+    stored = _resumed_config(Path(str(cfg.resume)), takes=takes)
+    if not (takes and _given(ROBOT_BUDGET)):
+        return Run(typed_config(stored), out, lock, resuming=True)
+    started = typed(GAConfig, current(stored).ga, "ga")
+    changed = copy.deepcopy(stored)
+    changed.ga.robot_budget = cfg.ga.robot_budget
+    return Run(typed_config(changed), out, lock, resuming=True, started_ga=started)
 
 
 def main(cfg: DictConfig, code: EvolveCode = EVO_CODE) -> object:
@@ -517,27 +534,19 @@ def main(cfg: DictConfig, code: EvolveCode = EVO_CODE) -> object:
     logging.raiseExceptions = False
     try:
         with handle_signals(), lock:
-            task = TASKS.get(_resumable_task(cfg))
+            name = _resumable_task(cfg)
+            task = TASKS.get(name)
             if task is None:
                 raise ConfigError(
                     f"task: unknown task {cfg.task!r}; expected one of {sorted(TASKS)}")
-            threads = cfg.torch_threads
-            if not isinstance(threads, int) or threads < 1:
-                raise ConfigError(f"torch_threads: expected a positive integer, got {threads!r}")
-            torch.set_num_threads(threads)
-            if cfg.resume is None:
-                check_seed(cfg)
-                cfg = current(cfg)  # config.yaml holds today's form (ga.structure=R too)
-                if task is not run_retrain:  # it writes once its folder is checked
-                    _write_config(cfg, out, lock)
+            run = start(cfg, name, out, lock)
+            torch.set_num_threads(run.config.torch_threads)
             if task is run_evolve:  # the one task whose code a caller may choose
                 task = functools.partial(run_evolve, code=code)
-            return task(cfg, out, lock)  # a sweeper's objectives (noise_sweep), else None
-    except ConfigError as err:
-        print(f"error: bad config: {err}", file=sys.stderr)
-        sys.exit(2)
-    except RunDirectoryBusy as err:
-        print(f"error: {err}", file=sys.stderr)
+            return task(run)  # a sweeper's objectives (noise_sweep), else None
+    except (ConfigError, RunDirectoryBusy) as err:
+        prefix = "bad config: " if isinstance(err, ConfigError) else ""
+        print(f"error: {prefix}{err}", file=sys.stderr)
         sys.exit(2)
     except Exception as err:
         # A full disk (or quota, or file-size limit): the state on disk is the last one
@@ -561,10 +570,6 @@ def _task_name(cfg: DictConfig) -> str:
     path = RunLayout(Path(str(cfg.resume))).config
     stored = OmegaConf.load(path) if path.is_file() else None
     return str(stored.get("task", "evolve")) if isinstance(stored, DictConfig) else "evolve"
-
-
-RESUMABLE = ("evolve", "retrain")
-"""The tasks ``resume=DIR`` continues."""
 
 
 def _resumable_task(cfg: DictConfig) -> str:

@@ -22,10 +22,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import numpy.typing as npt
-from omegaconf import DictConfig, OmegaConf
 
 from evo.config import ConfigError
-from evo.edge import env_of, physics_of
+from evo.edge import run_config
 from evo.envs.params import EnvConfig, observation_size
 from evo.episode import Episode
 from evo.learners.common import load_checkpoint
@@ -40,12 +39,8 @@ from evo.run.records import read_history
 
 
 def _run_config(run_dir: Path) -> tuple[PhysicsParams, EnvConfig]:
-    path = RunLayout(run_dir).config
-    if not path.is_file():
-        raise ValueError(f"{path} not found; is {run_dir} an evo run directory?")
-    cfg = OmegaConf.load(path)
-    assert isinstance(cfg, DictConfig)
-    return physics_of(cfg), env_of(cfg)
+    config = run_config(run_dir)
+    return config.physics, config.env
 
 
 def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:

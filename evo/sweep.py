@@ -40,6 +40,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
 from evo.checks import at_least
+from evo.config import CONF_DIR
 from evo.fidelity import agreement, ceiling_line
 from evo.run.layout import RetrainLayout
 from evo.run.records import SweepTrial, write_sweep_trial
@@ -256,8 +257,6 @@ class SweepCheck(Callback):
     docstring)."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from evo.edge import CONF_DIR
-
         sweeper = config.hydra.sweeper
         try:
             check_params(sweep_params(config), config, CONF_DIR)

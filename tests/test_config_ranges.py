@@ -14,7 +14,7 @@ from __future__ import annotations
 import re
 import subprocess
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,8 @@ from omegaconf import DictConfig, OmegaConf
 from test_evolution import ENV, main_cmd
 
 from evo.config import ConfigError
-from evo.main import check_seed, evolve_parts, run_robots
+from evo.edge import typed_config
+from evo.main import evolve_parts
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 CONFIGS = {
@@ -123,7 +124,7 @@ BAD: dict[str, Any] = {
 }
 """One out-of-range value per numeric key (``[]`` stands for any list index)."""
 
-IN_MAIN = {"torch_threads"}
+IN_MAIN: set[str] = set()
 """Keys ``evo/main.py``'s ``main`` checks itself: covered by the subprocess test."""
 
 TOGETHER = [
@@ -199,13 +200,9 @@ def test_every_numeric_key_has_a_bad_value_in_the_table() -> None:
 
 def start_checks(cfg: DictConfig, key: str, out: Path) -> None:
     """What ``python evo/main.py`` checks at start, for ``key``."""
-    checks: dict[str, Callable[[], object]] = {
-        "seed": lambda: check_seed(cfg),
-        "robots.count": lambda: run_robots(cfg, out, None),  # type: ignore[arg-type]
-    }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        checks.get(key, lambda: evolve_parts(cfg, out))()
+        evolve_parts(typed_config(cfg), out)
 
 
 @pytest.fixture(scope="module")

@@ -35,7 +35,7 @@ from evo.components.ga import (
     Roulette,
 )
 from evo.config import ConfigError, current, method_label, typed
-from evo.edge import physics_of, warn_if_failures_cannot_end
+from evo.edge import typed_config, warn_if_failures_cannot_end
 from evo.envs.params import EnvConfig
 from evo.learners.common import LearnerConfig
 from evo.learners.ppo import PPO
@@ -82,7 +82,7 @@ def no_ray_start(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def build(cfg: DictConfig, out: Path) -> EvolveParts:
-    parts = evolve_parts(cfg, out)
+    parts = evolve_parts(typed_config(cfg), out)
     assert isinstance(parts.ga, GAConfig)
     assert isinstance(parts.strategy, Evolve | RandomStructures)
     assert isinstance(parts.ga.replacement, ReplaceWorst)
@@ -145,21 +145,28 @@ def test_every_group_option_builds_an_evolution(
         assert parts.job.method == ("E+L" if option == "evolve" else "R+L")
 
 
+GIVEN = {"retrain": ["retrain.random=3"]}
+"""What an experiment needs on the command line besides itself (+exp=retrain: the
+structures to train)."""
+
+
 @pytest.mark.parametrize("experiment", EXPERIMENTS)
 def test_every_experiment_composes_and_builds(
     hydra_conf: None, tmp_path: Path, experiment: str
 ) -> None:
-    cfg = compose("config", overrides=[f"+exp={experiment}"], return_hydra_config=True)
+    given = GIVEN.get(experiment, [])
+    cfg = compose("config", overrides=[f"+exp={experiment}", *given],
+                  return_hydra_config=True)
     assert cfg.task in TASKS, f"{experiment}: unknown task {cfg.task}"
     jobs = sweep(cfg) if str(cfg.hydra.mode) == "RunMode.MULTIRUN" else [[]]
     for job in jobs:
-        job_cfg = compose("config", overrides=[f"+exp={experiment}", *job])
+        job_cfg = compose("config", overrides=[f"+exp={experiment}", *given, *job])
         if job_cfg.task == "evolve":
             build(job_cfg, tmp_path)
         else:  # train / evaluate: one robot, the same typed settings
             assert isinstance(typed(LearnerConfig, job_cfg.learner, "learner"), LearnerConfig)
             assert isinstance(typed(EnvConfig, job_cfg.env, "env"), EnvConfig)
-            physics_of(job_cfg)
+            typed_config(job_cfg)
     text = (CONF / "exp" / f"{experiment}.yaml").read_text()
     assert text.startswith("# @package _global_"), "experiments are global overlays"
 
@@ -409,7 +416,7 @@ def test_an_older_config_yaml_gives_todays_typed_config(hydra_conf: None, tmp_pa
     # What today's code writes reads back as the same config.
     written = tmp_path / "written"
     written.mkdir()
-    _write_config(current(compose("config", overrides=OLD_RUN_VALUES)), written)
+    _write_config(typed_config(compose("config", overrides=OLD_RUN_VALUES)).yaml, written)
     again = build(OmegaConf.load(written / "config.yaml"), written)
     assert again.ga == today.ga and again.job.learner == today.job.learner
 
@@ -490,7 +497,7 @@ def test_bad_values_name_their_key(
 ) -> None:
     cfg = compose("config", overrides=["+exp=smoke", override])
     with pytest.raises(ConfigError) as info:
-        evolve_parts(cfg, tmp_path)
+        evolve_parts(typed_config(cfg), tmp_path)
     assert message in str(info.value), str(info.value)
 
 
@@ -580,12 +587,12 @@ def test_a_new_run_in_a_run_directory_must_have_its_config(
     cfg = compose("config", overrides=["+exp=smoke"])
     fresh = tmp_path / "fresh"
     fresh.mkdir()
-    _write_config(cfg, fresh)
+    _write_config(OmegaConf.to_yaml(cfg, resolve=True), fresh)
     saved = (fresh / "config.yaml").read_text()
     assert OmegaConf.create(saved) == OmegaConf.create(OmegaConf.to_yaml(cfg, resolve=True))
     (fresh / "state.json").write_text("{}")
-    _write_config(cfg, fresh)  # the same command again continues the run
+    _write_config(OmegaConf.to_yaml(cfg, resolve=True), fresh)  # the same command again
     other = compose("config", overrides=["+exp=smoke", "seed=5"])
     with pytest.raises(ConfigError, match=f"hydra.run.dir: {fresh} already holds a run"):
-        _write_config(other, fresh)
+        _write_config(OmegaConf.to_yaml(other, resolve=True), fresh)
     assert (fresh / "config.yaml").read_text() == saved, "the run's config was replaced"

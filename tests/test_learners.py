@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from evo.components.inheritance import policy_start
-from evo.edge import compose_config, training_parts
+from evo.edge import compose_config, typed_config
 from evo.envs.params import EnvConfig, TaskParams, observation_size
 from evo.learners.common import (
     Inheritance,
@@ -97,7 +97,7 @@ def test_budget_is_respected_within_one_batch(ppo_run) -> None:  # noqa: ANN001
 
 def learner_of(overrides: list[str]) -> LearnerConfig:
     """The learner ``python evo/main.py <overrides>`` trains with."""
-    return training_parts(compose_config(overrides)).learner
+    return typed_config(compose_config(overrides)).learner
 
 
 @pytest.mark.parametrize(

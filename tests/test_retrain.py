@@ -243,8 +243,8 @@ def test_a_bad_retrain_setting_names_its_key(tmp_path: Path) -> None:
     """Checked before anything is written (``main`` turns the error into one line, exit 2;
     the robots' checks are the alias's, ``test_noise_ceiling``)."""
     from evo.config import ConfigError
-    from evo.edge import compose_config
-    from evo.main import run_retrain
+    from evo.edge import compose_config, typed_config
+    from evo.main import Run, run_retrain
     from evo.run.files import RunLock
 
     for overrides, message in [
@@ -256,7 +256,7 @@ def test_a_bad_retrain_setting_names_its_key(tmp_path: Path) -> None:
     ]:
         cfg = compose_config(["+exp=retrain", *overrides])
         with pytest.raises(ConfigError, match=message):
-            run_retrain(cfg, tmp_path / "out", RunLock(tmp_path))
+            run_retrain(Run(typed_config(cfg), tmp_path / "out", RunLock(tmp_path)))
     assert not (tmp_path / "out").exists()
 
 

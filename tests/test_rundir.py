@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 from test_evolution import (
     ENV,
     REPO,
@@ -49,9 +49,11 @@ from test_evolution import (
     run,
 )
 
-from evo.config import ConfigError
+from evo.components.ga import GAConfig
+from evo.config import ConfigError, typed
+from evo.edge import typed_config
 from evo.evaluation import Candidate
-from evo.main import _state_to_continue, check_seed, with_robot_budget
+from evo.main import _state_to_continue, check_robot_budget
 from evo.record import mcap_file, rrd
 from evo.robot.tree import Robot
 from evo.run.files import RunDirectoryBusy, RunLock, is_locked
@@ -111,7 +113,7 @@ BREAKAGES: dict[str, tuple[Callable[[Path], None], str]] = {
 def resume_checks(run_dir: Path) -> None:
     """What ``resume=run_dir`` checks before it writes anything: the config it was
     started with, then the saved state (``evo/main.py``'s own functions, in-process)."""
-    check_seed(OmegaConf.load(run_dir / "config.yaml"))
+    typed_config(OmegaConf.load(run_dir / "config.yaml"))
     _state_to_continue(RunStore(run_dir), resuming=True)
 
 
@@ -699,16 +701,26 @@ def saved_with(born: int, in_flight: int = 0) -> SavedState:
     return SavedState(0, born, rng_state(np.random.default_rng(0)), [], rows, flying, 0.0)
 
 
+def with_robot_budget(cfg: DictConfig, robot_budget: object, saved: SavedState) -> GAConfig:
+    """The ``ga`` group of a run started with ``cfg``, resumed with ``ga.robot_budget``
+    given (checked as ``evo/main.py`` checks it)."""
+    ga = OmegaConf.to_container(cfg.ga)
+    assert isinstance(ga, dict)
+    changed = typed(GAConfig, {**ga, "robot_budget": robot_budget}, "ga")
+    check_robot_budget(typed(GAConfig, cfg.ga, "ga"), changed, saved)
+    return changed
+
+
 def test_another_robot_budget_must_keep_the_budgets_of_the_robots_born() -> None:
     rising = OmegaConf.create({"ga": {"population_size": 3, "robot_budget": 6, "schedule": {
         "initial": 100, "first": 200, "last": 400}}})
     # Only initial robots born: any N; robot 3 too: 200 steps at 6 robots and at 8.
     for born, n in ((3, 4), (3, 60), (0, 3), (4, 8)):
-        assert with_robot_budget(rising, n, saved_with(born)).ga.robot_budget == n
+        assert with_robot_budget(rising, n, saved_with(born)).robot_budget == n
     assert rising.ga.robot_budget == 6, "the config given is left alone"
     # Robots 3-4 in flight at N = 3 are dropped: robot 3 would have another budget, but
     # the robots kept (0-2, initial) keep theirs.
-    assert with_robot_budget(rising, 3, saved_with(5, in_flight=2)).ga.robot_budget == 3
+    assert with_robot_budget(rising, 3, saved_with(5, in_flight=2)).robot_budget == 3
     for born, n, message in (
         (5, 8, "would give robot 4, already born, 250 env steps instead of 300 (1 of the 5"),
         (5, 5, "would give robot 4, already born, 400 env steps instead of 300 (1 of the 5"),
@@ -722,4 +734,4 @@ def test_another_robot_budget_must_keep_the_budgets_of_the_robots_born() -> None
     fixed = OmegaConf.create({"ga": {"population_size": 3, "robot_budget": 6, "schedule": {
         "initial": 100, "first": 300, "last": 300}}})
     for born, n in ((4, 4), (6, 6), (6, 600)):  # first = last: any N from the robots born
-        assert with_robot_budget(fixed, n, saved_with(born)).ga.robot_budget == n
+        assert with_robot_budget(fixed, n, saved_with(born)).robot_budget == n
