@@ -52,6 +52,7 @@ from evo.robot.io import parse_robot
 from evo.robot.tree import Robot
 from evo.run.files import WriteFailed, write_csv, write_failure, write_text
 from evo.run.layout import RunLayout
+from evo.run.records import Candidate
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,39 +71,6 @@ class Job:
     batch (0 = none); an evaluation past it stops with an ``EvaluationTimeout`` error."""
     early: EarlyRejection = field(default_factory=EarlyRejection)
     """When an offspring's training may stop early (``ga.early_rejection``)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Candidate:
-    """One robot to evaluate (a candidate structure of the run).
-
-    Attributes:
-        birth: Birth order in the run (0-based).
-        name: Unique id of the evaluation (the robot's name, made unique if needed).
-        robot: The robot's canonical ``evo.robot/1`` JSON.
-        budget: Training budget, env steps.
-        seed: The evaluation's own seed.
-        parents: Names of the parents (empty for random robots).
-        operator: How the robot was made (random, crossover, ...).
-        threshold: The population minimum it was bred against, which it must beat to
-            enter the population (NaN when it enters anyway: an initial robot).
-        inherit: The parent whose trained policy it starts from ("" for none:
-            ``ga.inheritance`` off, or a robot without parents); its checkpoint is the
-            run's ``evals/<inherit>.pt``.
-        inherit_actuators: For each of its actuators, the parent's actuator it follows,
-            or -1 (``evo.components.inheritance.PolicyStart``).
-    """
-
-    birth: int
-    name: str
-    robot: str
-    budget: int
-    seed: int
-    parents: tuple[str, ...] = ()
-    operator: str = "random"
-    threshold: float = float("nan")
-    inherit: str = ""
-    inherit_actuators: tuple[int, ...] = ()
 
 
 class EvaluationTimeout(RuntimeError):

@@ -53,7 +53,7 @@ from evo.edge import (
     training_parts,
     warn_if_failures_cannot_end,
 )
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.interrupt import Interrupted, critical, handle_signals
 from evo.learners.common import SavePolicy
@@ -75,7 +75,7 @@ from evo.run.files import (
     write_text,
 )
 from evo.run.layout import RunLayout
-from evo.run.records import HistoryRow
+from evo.run.records import Candidate, HistoryRow
 from evo.run.store import RunStore, SavedState
 
 

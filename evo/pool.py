@@ -18,7 +18,8 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 
 from evo.components.executors import EvalExecutor
-from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
+from evo.evaluation import Job, Outcome, evaluate, outcome_of
+from evo.run.records import Candidate
 
 Submission = tuple[Candidate, Job]
 """A candidate and the job it is evaluated under."""

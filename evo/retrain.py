@@ -30,12 +30,13 @@ from typing import TypedDict, cast
 import numpy as np
 import pandas as pd
 
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
 from evo.pool import EvaluationPool
 from evo.record import read_curve
 from evo.robot import GeneratorParams, Limits, Robot
 from evo.run.files import write_csv, write_json
 from evo.run.layout import RetrainLayout
+from evo.run.records import Candidate
 from evo.run.store import RunStore
 
 OPERATOR = "noise-ceiling"

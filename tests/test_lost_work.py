@@ -26,7 +26,8 @@ import pytest
 from test_evolution import comparable, fake_evaluate, make_evolution, read_history
 
 from evo.components.executors import EvaluationLost, LocalExecutor
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
+from evo.run.records import Candidate
 
 REPO = Path(__file__).resolve().parents[1]
 POPULATION, BUDGET = 3, 6

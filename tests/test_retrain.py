@@ -19,9 +19,10 @@ import pytest
 from test_evolution import ENV, main_cmd
 
 from analysis import noise_ceiling as nc
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
 from evo.pool import EvaluationPool
 from evo.retrain import TRAINING_COLUMNS
+from evo.run.records import Candidate
 
 REPO = Path(__file__).resolve().parents[1]
 ROBOTS = ("four_wheeler", "snake", "twisted_four_wheeler")
