@@ -35,8 +35,9 @@ from rich.table import Table
 
 from evo.components.executors import EvalExecutor, LocalExecutor, RayExecutor, SerialExecutor
 from evo.envs.params import EnvConfig, TaskParams
-from evo.evaluation import Job, Outcome, evaluate, outcome_of
+from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
+from evo.pool import outcome_of
 from evo.record import RecordConfig
 from evo.robot import random_robot
 from evo.robot.builder import PhysicsParams

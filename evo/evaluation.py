@@ -20,12 +20,10 @@ import json
 import math
 import time
 import traceback
-from concurrent.futures import Future
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from evo.components.executors import EvalExecutor, EvaluationLost
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import compile_scene
@@ -97,24 +95,6 @@ class Outcome:
     ``fitness`` is Eq. 8 over the episodes it completed."""
     predicted: float = float("nan")
     """The early-rejection rule's last prediction of the final fitness."""
-
-
-def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
-    """The outcome of a finished ``evaluate`` future; an evaluation lost on every attempt
-    (its worker or node died each time) or an exception outside ``evaluate`` becomes an
-    outcome with the error, in one line."""
-    try:
-        return future.result()
-    except EvaluationLost as err:
-        executor.restart()
-        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {one_line(err)}")
-    except WriteFailed:
-        raise  # the disk's fault: the run stops and resumes with the robot in flight
-    except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
-        cause = getattr(err, "cause", None)  # Ray wraps a task's error (RayTaskError)
-        if isinstance(cause, WriteFailed):
-            raise WriteFailed(cause.errno, cause.strerror, cause.filename) from err
-        return Outcome(candidate.birth, candidate.name, error=first_line(err))
 
 
 EXPECTED = (EvaluationTimeout,)

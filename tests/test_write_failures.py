@@ -18,7 +18,8 @@ import pytest
 from test_evolution import make_evolution
 
 from evo.components.executors import SerialExecutor
-from evo.evaluation import evaluate, outcome_of
+from evo.evaluation import evaluate
+from evo.pool import outcome_of
 from evo.run.files import WriteFailed, write_failure
 from evo.run.records import Candidate
 
