@@ -21,6 +21,7 @@ test: $(STAMP)
 	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile
 	$(BIN)/ruff check evo analysis tests bench
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 test-long: $(STAMP)
 	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile -m long

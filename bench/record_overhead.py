@@ -21,11 +21,12 @@ from rich.console import Console
 from rich.table import Table
 
 from evo.envs.params import EnvConfig
-from evo.evaluation import Candidate, Job, evaluate
+from evo.evaluation import Job, evaluate
 from evo.learners.ppo import PPO
 from evo.record import RecordConfig
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
+from evo.run.records import Candidate
 
 
 def main() -> None:

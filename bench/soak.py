@@ -35,11 +35,13 @@ from rich.table import Table
 
 from evo.components.executors import EvalExecutor, LocalExecutor, RayExecutor, SerialExecutor
 from evo.envs.params import EnvConfig, TaskParams
-from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
+from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
+from evo.pool import outcome_of
 from evo.record import RecordConfig
 from evo.robot import random_robot
 from evo.robot.builder import PhysicsParams
+from evo.run.records import Candidate
 
 GROWTH_GOAL = 0.05
 """Most RSS growth after the first block, as a fraction of the RSS at its end."""

@@ -100,7 +100,7 @@ class EvoConfig:
         robots: ``robots``: what ``task=robots`` draws.
         retrain: ``retrain``: what ``task=retrain`` trains (None without the node).
         noise_sweep: ``noise_sweep``: one sweep trial (None without the node).
-        executor: The ``executor`` node, checked; :meth:`make_executor` builds it (a
+        executor: The ``executor`` node; :meth:`make_executor` builds and checks it (a
             local Ray instance starts then).
         yaml: The resolved config, as ``config.yaml`` holds it.
         training_yaml: The resolved config without the executor group (which decides
@@ -165,9 +165,9 @@ def typed_config(cfg: DictConfig) -> EvoConfig:
     cfg = current(cfg)
     morphology = cfg.get("morphology") or {}
     executor = cfg.get("executor")
-    plain = OmegaConf.to_container(executor, resolve=True) if executor is not None else None
-    if not isinstance(plain, dict) or "_target_" not in plain:
-        raise ConfigError("executor: expected a mapping with a _target_ class")
+    plain = OmegaConf.to_container(executor, resolve=True) if executor is not None else {}
+    if not isinstance(plain, dict):
+        raise ConfigError(f"executor: expected a mapping with a _target_ class, got {plain!r}")
 
     def optional(cls: type[Any], key: str) -> Any:
         node = cfg.get(key)

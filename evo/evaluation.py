@@ -20,12 +20,10 @@ import json
 import math
 import time
 import traceback
-from concurrent.futures import Future
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from evo.components.executors import EvalExecutor, EvaluationLost
 from evo.early_rejection import EarlyRejection, StoppingRule
 from evo.envs.params import EnvConfig
 from evo.envs.scene import compile_scene
@@ -52,6 +50,7 @@ from evo.robot.io import parse_robot
 from evo.robot.tree import Robot
 from evo.run.files import WriteFailed, write_csv, write_failure, write_text
 from evo.run.layout import RunLayout
+from evo.run.records import Candidate
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,39 +72,6 @@ class Job:
     eval_episodes: int = 0
     """Episodes of a deterministic evaluation after training (the policy's mean action,
     seed + 1, as ``+exp=train`` evaluates it); 0: none."""
-
-
-@dataclass(frozen=True, slots=True)
-class Candidate:
-    """One robot to evaluate (a candidate structure of the run).
-
-    Attributes:
-        birth: Birth order in the run (0-based).
-        name: Unique id of the evaluation (the robot's name, made unique if needed).
-        robot: The robot's canonical ``evo.robot/1`` JSON.
-        budget: Training budget, env steps.
-        seed: The evaluation's own seed.
-        parents: Names of the parents (empty for random robots).
-        operator: How the robot was made (random, crossover, ...).
-        threshold: The population minimum it was bred against, which it must beat to
-            enter the population (NaN when it enters anyway: an initial robot).
-        inherit: The parent whose trained policy it starts from ("" for none:
-            ``ga.inheritance`` off, or a robot without parents); its checkpoint is the
-            run's ``evals/<inherit>.pt``.
-        inherit_actuators: For each of its actuators, the parent's actuator it follows,
-            or -1 (``evo.components.inheritance.PolicyStart``).
-    """
-
-    birth: int
-    name: str
-    robot: str
-    budget: int
-    seed: int
-    parents: tuple[str, ...] = ()
-    operator: str = "random"
-    threshold: float = float("nan")
-    inherit: str = ""
-    inherit_actuators: tuple[int, ...] = ()
 
 
 class EvaluationTimeout(RuntimeError):
@@ -134,24 +100,6 @@ class Outcome:
     """The early-rejection rule's last prediction of the final fitness."""
     evaluation: PolicyEvaluation | None = None
     """The deterministic evaluation after training (``Job.eval_episodes``), if any."""
-
-
-def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
-    """The outcome of a finished ``evaluate`` future; an evaluation lost on every attempt
-    (its worker or node died each time) or an exception outside ``evaluate`` becomes an
-    outcome with the error, in one line."""
-    try:
-        return future.result()
-    except EvaluationLost as err:
-        executor.restart()
-        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {one_line(err)}")
-    except WriteFailed:
-        raise  # the disk's fault: the run stops and resumes with the robot in flight
-    except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
-        cause = getattr(err, "cause", None)  # Ray wraps a task's error (RayTaskError)
-        if isinstance(cause, WriteFailed):
-            raise WriteFailed(cause.errno, cause.strerror, cause.filename) from err
-        return Outcome(candidate.birth, candidate.name, error=first_line(err))
 
 
 EXPECTED = (EvaluationTimeout,)

@@ -30,16 +30,16 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from evo.components.executors import EvalExecutor
-from evo.components.ga import GAConfig, Member, Offspring, StructureStrategy
+from evo.components.ga import GAConfig, Offspring, StructureStrategy
 from evo.components.inheritance import PolicyStart, policy_start
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.interrupt import critical
 from evo.pool import EvaluationPool
 from evo.record import RecordConfig
 from evo.record.run import Birth, RunMetadata, RunRecorder
 from evo.robot.builder import PhysicsParams, build
 from evo.robot.operators import OperatorError
-from evo.run.records import HistoryRow, RunSummary
+from evo.run.records import Candidate, HistoryRow, Member, RunSummary
 from evo.run.store import RunStore, SavedState, rng_state
 
 RANDOM_FALLBACK = "random-fallback"

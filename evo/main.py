@@ -52,7 +52,7 @@ from evo.config import (
     typed,
 )
 from evo.edge import EvoConfig, retraining, typed_config, warn_if_failures_cannot_end
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.evolution import Evolution, RunLog
 from evo.fidelity import agreement, ceiling_line
 from evo.interrupt import Interrupted, critical, handle_signals
@@ -77,7 +77,7 @@ from evo.run.files import (
     write_text,
 )
 from evo.run.layout import RetrainLayout, RunLayout
-from evo.run.records import HistoryRow, read_retrain_settings
+from evo.run.records import Candidate, HistoryRow, read_retrain_settings
 from evo.run.store import RunStore, SavedState
 from evo.sweep import trial_overrides
 

@@ -4,7 +4,7 @@ Both drivers of evaluations, the evolution (``evo.evolution.Evolution``) and the
 retraining of fixed structures (``evo.retrain``, the noise ceiling), run through
 :meth:`EvaluationPool.run`: it first submits the candidates a previous session left in
 flight, then asks its driver for a new candidate whenever a worker is free, and hands
-each outcome to the driver as it finishes (``evo.evaluation.outcome_of``: a failed or
+each outcome to the driver as it finishes (:func:`outcome_of`: a failed or
 lost evaluation is an outcome with its error). Interrupted (a signal raised as
 ``evo.interrupt.Interrupted``, or any error), it stops the evaluations in flight with
 ``executor.terminate()`` instead of waiting for them; the driver has saved what it
@@ -17,8 +17,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 
-from evo.components.executors import EvalExecutor
-from evo.evaluation import Candidate, Job, Outcome, evaluate, outcome_of
+from evo.components.executors import EvalExecutor, EvaluationLost
+from evo.evaluation import Job, Outcome, evaluate, first_line, one_line
+from evo.run.files import WriteFailed
+from evo.run.records import Candidate
 
 Submission = tuple[Candidate, Job]
 """A candidate and the job it is evaluated under."""
@@ -72,3 +74,21 @@ class EvaluationPool:
     def _submit(self, submission: Submission) -> None:
         candidate, job = submission
         self.running[self.executor.submit(self.evaluate, candidate, job)] = candidate
+
+
+def outcome_of(future: Future[Outcome], candidate: Candidate, executor: EvalExecutor) -> Outcome:
+    """The outcome of a finished ``evaluate`` future; an evaluation lost on every attempt
+    (its worker or node died each time) or an exception outside ``evaluate`` becomes an
+    outcome with the error, in one line."""
+    try:
+        return future.result()
+    except EvaluationLost as err:
+        executor.restart()
+        return Outcome(candidate.birth, candidate.name, error=f"evaluation lost: {one_line(err)}")
+    except WriteFailed:
+        raise  # the disk's fault: the run stops and resumes with the robot in flight
+    except Exception as err:  # noqa: BLE001 - recorded, the caller goes on
+        cause = getattr(err, "cause", None)  # Ray wraps a task's error (RayTaskError)
+        if isinstance(cause, WriteFailed):
+            raise WriteFailed(cause.errno, cause.strerror, cause.filename) from err
+        return Outcome(candidate.birth, candidate.name, error=first_line(err))

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
 from evo.pool import EvaluationPool
 from evo.record import read_curve
 from evo.robot import (
@@ -53,6 +53,7 @@ from evo.robot import (
 from evo.run.layout import RetrainLayout, RunLayout, file_stem
 from evo.run.records import (
     TRAINING_COLUMNS,
+    Candidate,
     RetrainSettings,
     TrainingRow,
     read_progress,

@@ -1,4 +1,8 @@
-"""The shape of the code a newcomer reads: no import cycles, no very long functions.
+"""The shape of the code a newcomer reads: no import cycles, every module of evo in a
+layer, no very long functions.
+
+The layers themselves are import-linter's contracts in ``pyproject.toml``
+(``lint-imports``, run by ``make test``); here, that every module of evo is in one.
 
 Imports are read from the source (``ast``), at any depth (an import inside a function
 is still a dependency), leaving out ``if TYPE_CHECKING:`` blocks, which never run.
@@ -9,6 +13,7 @@ is still a dependency), leaving out ``if TYPE_CHECKING:`` blocks, which never ru
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +77,22 @@ def import_cycles() -> list[list[str]]:
     return sorted(sorted(g) for g in groups if len(g) > 1)
 
 
+def layers() -> list[str]:
+    """The modules and packages named by the layers contract of ``pyproject.toml``."""
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]
+    (contract,) = [c for c in config["contracts"] if c.get("id") == "layers"]
+    return [name.strip() for layer in contract["layers"] for name in layer.split("|")]
+
+
+def outside_layers() -> list[str]:
+    """The modules of evo that no layer holds (a package whose ``__init__`` imports
+    nothing, like ``evo.components``, is only a folder: its modules are placed one by one)."""
+    named, known = layers(), modules()
+    return [m for m, path in known.items() if m.startswith("evo.")
+            and not any(m == n or m.startswith(f"{n}.") for n in named)
+            and not (path.name == "__init__.py" and not imports(path, m, known))]
+
+
 def long_functions(limit: int = LONGEST) -> list[tuple[int, str]]:
     """(lines, module:function) of every function longer than ``limit`` lines."""
     found = []
@@ -96,6 +117,11 @@ def test_the_import_graph_finds_a_cycle_it_is_shown(tmp_path: Path) -> None:
 
 def test_no_module_imports_itself_through_others() -> None:
     assert import_cycles() == []
+
+
+def test_every_module_of_evo_is_in_a_layer() -> None:
+    assert "evo.robot" in layers() and "evo.robot.gallery" not in outside_layers()
+    assert outside_layers() == [], "place them in pyproject.toml's [tool.importlinter] layers"
 
 
 def test_no_function_is_longer_than_a_screen() -> None:

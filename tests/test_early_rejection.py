@@ -26,10 +26,11 @@ from test_evolution import (
 
 from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
 from evo.envs.params import EnvConfig, TaskParams
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
+from evo.run.records import Candidate
 
 RULE = EarlyRejection(enabled=True, checkpoints=(0.2, 0.35, 0.5), margin=0.1)
 

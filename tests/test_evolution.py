@@ -42,12 +42,12 @@ from evo.components.ga import (
     Roulette,
 )
 from evo.envs.params import EnvConfig
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.evolution import Evolution, evaluation_seed
 from evo.learners.ppo import PPO
 from evo.robot import OperatorError, load_robot
 from evo.robot.builder import PhysicsParams
-from evo.run.records import HistoryRow
+from evo.run.records import Candidate, HistoryRow
 from evo.run.store import RunStore
 
 REPO = Path(__file__).resolve().parents[1]

@@ -27,17 +27,17 @@ from evo.components.ga import (
     BudgetSchedule,
     Evolve,
     GAConfig,
-    Member,
     RandomStructures,
     ReplaceWorst,
     Roulette,
 )
 from evo.envs.params import EnvConfig
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
 from evo.record.readback import read_curve
 from evo.robot import GeneratorParams, Limits, Robot, parse_robot, random_robot
 from evo.robot.builder import PhysicsParams
+from evo.run.records import Candidate, Member
 
 DRAWS = 10_000
 ALPHA = 1e-3  # a seeded test: the threshold only has to separate right from wrong

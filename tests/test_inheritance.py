@@ -27,7 +27,7 @@ from evo.components.ga import BudgetSchedule, Evolve, GAConfig
 from evo.components.inheritance import actuator_origins, policy_start
 from evo.early_rejection import EarlyRejection
 from evo.envs.params import EnvConfig, TaskParams, observation_origins, observation_size
-from evo.evaluation import Candidate, Job, Outcome, evaluate
+from evo.evaluation import Job, Outcome, evaluate
 from evo.evolution import Evolution
 from evo.learners.common import (
     Inheritance,
@@ -43,7 +43,7 @@ from evo.robot import parse_robot, random_robots
 from evo.robot.builder import PhysicsParams, build
 from evo.robot.operators import crossover, surviving_origins
 from evo.robot.tree import ModuleType, Robot, walk
-from evo.run.records import HistoryRow
+from evo.run.records import Candidate, HistoryRow
 from evo.run.store import RunStore
 
 CONFIG = PPO(hidden=(16, 16))

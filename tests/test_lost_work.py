@@ -26,7 +26,8 @@ import pytest
 from test_evolution import comparable, fake_evaluate, make_evolution, read_history
 
 from evo.components.executors import EvaluationLost, LocalExecutor
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
+from evo.run.records import Candidate
 
 REPO = Path(__file__).resolve().parents[1]
 POPULATION, BUDGET = 3, 6
@@ -36,12 +37,15 @@ outside, the crasher's evaluation kills its own worker every time."""
 
 
 def marked_evaluate(candidate: Candidate, job: Job) -> Outcome:
-    """``fake_evaluate`` that takes a moment and leaves a start and a done marker."""
+    """``fake_evaluate`` that leaves a start and a done marker. The victim's first attempt
+    never ends by itself: it waits to be killed, so the kill lands in the middle of its
+    evaluation however slow the machine is."""
     attempts = Path(job.run_dir) / "attempts"
     attempts.mkdir(exist_ok=True)
     mark = attempts / f"{candidate.birth}-{os.getpid()}"
     mark.with_suffix(".start").touch()
-    time.sleep(1.5 if candidate.birth == VICTIM else 0.02)
+    if candidate.birth == VICTIM and len(list(attempts.glob(f"{VICTIM}-*.start"))) == 1:
+        faults.wait_to_be_killed()
     outcome = fake_evaluate(candidate, job)
     mark.with_suffix(".done").touch()
     return outcome
@@ -136,11 +140,14 @@ def test_a_dead_worker_spends_only_its_own_evaluations_retries(tmp_path: Path) -
     are submitted again without spending a retry."""
     executor = LocalExecutor(workers=2, retries=0)
     try:
-        started = tmp_path / "started"
-        innocent = executor.submit(faults.nap, 1.0, str(started))
+        started, release = tmp_path / "started", tmp_path / "release"
+        # The innocent runs until released; the culprit kills its worker once the
+        # innocent has started: the innocent is in flight when the pool breaks.
+        innocent = executor.submit(faults.hold, str(started), str(release))
         culprit = executor.submit(faults.die, str(started))
         with pytest.raises(EvaluationLost, match="killed by SIGKILL"):
             culprit.result(timeout=300)
+        release.touch()
         assert innocent.result(timeout=300) > 0, "resubmitted, not failed"
     finally:
         executor.shutdown()

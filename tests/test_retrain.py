@@ -20,9 +20,9 @@ import pytest
 from test_evolution import ENV, main_cmd
 
 from analysis import noise_ceiling as nc
-from evo.evaluation import Candidate, Job, Outcome
+from evo.evaluation import Job, Outcome
 from evo.pool import EvaluationPool
-from evo.run.records import TRAINING_COLUMNS
+from evo.run.records import TRAINING_COLUMNS, Candidate
 
 REPO = Path(__file__).resolve().parents[1]
 ROBOTS = ("four_wheeler", "snake", "twisted_four_wheeler")

@@ -52,12 +52,11 @@ from test_evolution import (
 from evo.components.ga import GAConfig
 from evo.config import ConfigError, typed
 from evo.edge import typed_config
-from evo.evaluation import Candidate
 from evo.main import _state_to_continue, check_robot_budget
 from evo.record import mcap_file, rrd
 from evo.robot.tree import Robot
 from evo.run.files import RunDirectoryBusy, RunLock, is_locked
-from evo.run.records import HistoryRow
+from evo.run.records import Candidate, HistoryRow
 from evo.run.store import RunStore, SavedState, rng_state
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))

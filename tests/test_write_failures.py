@@ -18,8 +18,10 @@ import pytest
 from test_evolution import make_evolution
 
 from evo.components.executors import SerialExecutor
-from evo.evaluation import Candidate, evaluate, outcome_of
+from evo.evaluation import evaluate
+from evo.pool import outcome_of
 from evo.run.files import WriteFailed, write_failure
+from evo.run.records import Candidate
 
 
 def test_a_write_failure_names_its_file_and_crosses_from_a_worker_intact() -> None:

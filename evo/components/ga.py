@@ -43,16 +43,7 @@ from evo.robot.operators import (
 )
 from evo.robot.tree import Robot
 from evo.robot.validate import Limits
-
-
-@dataclass(frozen=True, slots=True)
-class Member:
-    """One evaluated robot in the population."""
-
-    name: str
-    robot: Robot
-    fitness: float
-
+from evo.run.records import Member
 
 # ---- selection ------------------------------------------------------------------------
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -28,8 +28,19 @@ from evo.run.files import write_csv, write_json
 from evo.run.layout import TrainLayout
 from evo.run.records import TrainSummary, write_train_summary
 
-if TYPE_CHECKING:
-    from evo.edge import TrainingParts
+
+class TrainingSetup(Protocol):
+    """What a training or an evaluation of one robot is set up with (the config edge's
+    ``evo.edge.TrainingParts`` is one): its module constants, env and learner."""
+
+    @property
+    def physics(self) -> PhysicsParams: ...
+
+    @property
+    def env(self) -> EnvConfig: ...
+
+    @property
+    def learner(self) -> LearnerConfig: ...
 
 
 def _progress(console: Console) -> Progress:
@@ -44,7 +55,7 @@ def _progress(console: Console) -> Progress:
     )
 
 
-def train_robot(robot: Robot, parts: TrainingParts, *, seed: int, out: Path,
+def train_robot(robot: Robot, parts: TrainingSetup, *, seed: int, out: Path,
                 console: Console | None = None) -> TrainSummary:
     """Train ``robot`` for ``parts.learner.total_steps``, evaluate it, write the run files.
 
@@ -136,7 +147,7 @@ class EvaluationSummary(PolicyEvaluationJSON):
     seed: int
 
 
-def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingParts, *, seed: int,
+def evaluate_robot(robot: Robot, checkpoint: Path, parts: TrainingSetup, *, seed: int,
                    out: Path, console: Console | None = None) -> EvaluationSummary:
     """Run the policy in ``checkpoint`` deterministically for the learner's
     ``eval_episodes`` episodes."""

@@ -8,7 +8,9 @@ Verbs and exit codes (scripts rely on them):
   JSON, identical for the same seed.
 * ``crossover A.json B.json --seed S --out DIR``: the valid offspring of one crossover.
 * ``mutate FILE --seed S --out DIR``: one mutated robot (mutation is an extension).
-* ``info FILE``: module counts, m, n, observation and action sizes, hash.
+* ``info FILE``: module counts, m, n, the action size (one command per actuator), hash.
+  A robot knows its motors and pivots, not the task it is trained for: the observation
+  is the task's (``evo.envs.params.observation_size``).
 * ``mjcf FILE``: MJCF on stdout (robot on a floor) that MuJoCo compiles.
 * ``render FILE --out PNG``: an offscreen picture of the robot (needs OpenGL, e.g.
   ``MUJOCO_GL=egl``).
@@ -99,8 +101,6 @@ def _mutate(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    from evo.envs.params import TaskParams, action_size, observation_size  # the task's
-
     robot = load_robot(args.file)
     counts = ", ".join(f"{t.value} {robot.count(t)}" for t in ModuleType)
     print(f"name:        {robot.name}")
@@ -109,8 +109,7 @@ def _info(args: argparse.Namespace) -> int:
     print(f"depth:       {robot.depth}")
     print(f"motors m:    {robot.n_motors}")
     print(f"pivots n:    {robot.n_pivots}")
-    print(f"observation: {observation_size(robot, TaskParams())}  (9 + 2(m + n))")
-    print(f"action:      {action_size(robot)}  (m + n)")
+    print(f"action:      {robot.n_actuators}  (m + n: one command per actuator)")
     return EXIT_OK
 
 

@@ -10,16 +10,16 @@ from matplotlib.figure import Figure
 from rich.console import Console
 from rich.table import Table
 
-from evo.envs.params import TaskParams, action_size, observation_size
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import save_robot
 from evo.robot.tree import ModuleType, Robot
 
 
 def size_table(robots: Sequence[Robot]) -> Table:
-    """One row per robot: name, module counts, m, n, observation and action sizes."""
+    """One row per robot: name, module counts, m, n, depth and action size (one command
+    per actuator; the observation is the task's, ``evo.envs.params.observation_size``)."""
     table = Table(title=f"{len(robots)} robots")
-    columns = ("name", "modules", "motors m", "pivots n", "main", "wheels", "depth", "obs", "act")
+    columns = ("name", "modules", "motors m", "pivots n", "main", "wheels", "depth", "act")
     for column in columns:
         table.add_column(column, justify="left" if column == "name" else "right", no_wrap=True)
     for robot in robots:
@@ -31,8 +31,7 @@ def size_table(robots: Sequence[Robot]) -> Table:
             str(robot.count(ModuleType.MAIN)),
             str(robot.count(ModuleType.WHEEL)),
             str(robot.depth),
-            str(observation_size(robot, TaskParams())),
-            str(action_size(robot)),
+            str(robot.n_actuators),
         )
     return table
 

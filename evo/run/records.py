@@ -7,6 +7,10 @@
   ``history.csv`` store it, where ``parents`` is one text cell, the parents' names joined
   by ``;`` (:data:`PARENT_SEPARATOR`). :func:`write_history` writes the file,
   :func:`read_history` reads it back as a table with those columns.
+* :class:`Candidate` and :class:`Member`: a robot in flight and a member of the
+  population, as an evolution's ``state.json`` holds them (``evo.run.store``, which
+  writes and reads that file); the evaluation is given a ``Candidate``, the GA keeps its
+  population as ``Member`` records.
 * :class:`RunSummary`: an evolution's ``summary.json`` (:func:`write_run_summary`,
   :func:`read_run_summary`).
 * :class:`TrainSummary`: a one-robot training's ``summary.json`` (``+exp=train``;
@@ -29,6 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from evo.robot.tree import Robot
 from evo.run.files import JSONObject, write_csv, write_json, write_text
 
 PARENT_SEPARATOR = ";"
@@ -177,6 +182,73 @@ def read_history(path: Path) -> pd.DataFrame:
         OSError, ValueError: The file is missing or not a readable CSV.
     """
     return pd.read_csv(path, dtype=dict.fromkeys(HISTORY_TEXT_COLUMNS, str))
+
+
+# ---------------------------------------------------------------- the saved state's records
+
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    """One robot to evaluate (a candidate structure of the run); ``state.json`` holds
+    those in flight.
+
+    Attributes:
+        birth: Birth order in the run (0-based).
+        name: Unique id of the evaluation (the robot's name, made unique if needed).
+        robot: The robot's canonical ``evo.robot/1`` JSON.
+        budget: Training budget, env steps.
+        seed: The evaluation's own seed.
+        parents: Names of the parents (empty for random robots).
+        operator: How the robot was made (random, crossover, ...).
+        threshold: The population minimum it was bred against, which it must beat to
+            enter the population (NaN when it enters anyway: an initial robot).
+        inherit: The parent whose trained policy it starts from ("" for none:
+            ``ga.inheritance`` off, or a robot without parents); its checkpoint is the
+            run's ``evals/<inherit>.pt``.
+        inherit_actuators: For each of its actuators, the parent's actuator it follows,
+            or -1 (``evo.components.inheritance.PolicyStart``).
+    """
+
+    birth: int
+    name: str
+    robot: str
+    budget: int
+    seed: int
+    parents: tuple[str, ...] = ()
+    operator: str = "random"
+    threshold: float = float("nan")
+    inherit: str = ""
+    inherit_actuators: tuple[int, ...] = ()
+
+    def record(self) -> JSONObject:
+        """The candidate as ``state.json`` holds it: its fields."""
+        data: JSONObject = dataclasses.asdict(self)
+        return data
+
+    @classmethod
+    def from_record(cls, data: Mapping[str, Any]) -> Candidate:
+        """The candidate ``record()`` wrote; one saved before ``inherit_actuators``
+        existed follows no parent's actuators.
+
+        Raises:
+            KeyError, TypeError: A missing field or one it does not have.
+        """
+        return cls(**{**data, "parents": tuple(data["parents"]),
+                      "inherit_actuators": tuple(data.get("inherit_actuators", ()))})
+
+
+@dataclass(frozen=True, slots=True)
+class Member:
+    """One evaluated robot in the population; ``state.json`` and ``population.json``
+    hold its name and fitness (``record()``), its robot is ``robots/<name>.json``."""
+
+    name: str
+    robot: Robot
+    fitness: float
+
+    def record(self) -> JSONObject:
+        """The member as ``state.json`` and ``population.json`` hold it."""
+        return {"name": self.name, "fitness": self.fitness}
 
 
 # ---------------------------------------------------------------- an evolution's summary

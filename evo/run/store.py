@@ -14,21 +14,21 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypedDict, cast
 
 import numpy as np
 
-from evo.components.ga import Member
-from evo.evaluation import Candidate
 from evo.robot.io import RobotFileError, load_robot, save_robot
 from evo.robot.tree import Robot
 from evo.robot.validate import InvalidRobotError
 from evo.run import files
 from evo.run.layout import RunLayout
 from evo.run.records import (
+    Candidate,
     HistoryRow,
+    Member,
     RunSummary,
     read_history,
     write_history,
@@ -145,7 +145,7 @@ class RunStore:
 
     def save(self, state: SavedState, summary: RunSummary) -> None:
         """Write the state first (atomically), then the files derived from it."""
-        population = [{"name": m.name, "fitness": m.fitness} for m in state.population]
+        population = [member.record() for member in state.population]
         self.write_state({
             "version": STATE_VERSION,
             "seed": state.seed,
@@ -153,7 +153,7 @@ class RunStore:
             "rng": state.rng,
             "population": population,
             "history": [row.record() for row in state.history],
-            "pending": [asdict(t) for t in state.pending],
+            "pending": [t.record() for t in state.pending],
             "wall_seconds": state.wall_seconds,
         })
         if state.history:
@@ -190,9 +190,7 @@ class RunStore:
         try:
             np.random.default_rng().bit_generator.state = state["rng"]
             history = [HistoryRow.from_record(row) for row in state["history"]]
-            pending = [Candidate(**{**t, "parents": tuple(t["parents"]),
-                                     "inherit_actuators": tuple(t.get("inherit_actuators", ()))})
-                       for t in state["pending"]]
+            pending = [Candidate.from_record(t) for t in state["pending"]]
             fitness = {str(m["name"]): float(m["fitness"]) for m in state["population"]}
             seed, next_birth = int(state["seed"]), int(state["next_birth"])
             wall_seconds = float(state["wall_seconds"])
