@@ -34,11 +34,11 @@ from matplotlib.figure import Figure
 
 from analysis import early_slope as es
 from analysis import plots
-from analysis.bootstrap import Resampling
+from analysis.cli import parser, report_folder, resampling_of, run_report
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
-from analysis.report import parser, report_folder, resampling_of, run_report
+from analysis.stats import Resampling
 from analysis.tables import fully_trained, method_order
 
 REPORT = "early_slope.md"

@@ -38,10 +38,10 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from analysis import plots, stats
+from analysis.cli import report_folder, run_report
 from analysis.load import Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.population import final_population, population_trace
-from analysis.report import report_folder, run_report
 
 REPORT = "equal_cost.md"
 SIDES = ("without", "with")

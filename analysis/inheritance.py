@@ -8,9 +8,9 @@ makes ``runs/inheritance/{parent,off}_seed{0,1,2}/``). A run's method is ``with`
 ``without``: from its ``config.yaml`` ``ga.inheritance`` (``off`` is without, any other
 mode with), else from its folder name's prefix (``parent_``/``with_`` or
 ``off_``/``without_``). Its GA seed and population size come from
-:func:`analysis.history_runs.run_setting` (the config, else a name ending in
-``seed<S>``). Runs of the two methods with the same seed pair: they share their initial
-robots and initial trainings.
+:func:`analysis.load.run_setting` (the config, else a name ending in ``seed<S>``). Runs
+of the two methods with the same seed pair: they share their initial robots and initial
+trainings.
 
 It writes under ``--out``:
 
@@ -52,8 +52,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from analysis import plots
-from analysis.bootstrap import Resampling, bootstrap_ci
-from analysis.history_runs import run_setting
+from analysis.cli import parser, report_folder, run_report
 from analysis.load import (
     PathsLike,
     RunDirectoryError,
@@ -61,9 +60,10 @@ from analysis.load import (
     read_config,
     read_history,
     run_ids,
+    run_setting,
 )
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table
-from analysis.report import parser, report_folder, run_report
+from analysis.stats import Resampling, bootstrap_ci
 from evo.run.layout import RunLayout
 from evo.run.records import RunSummary, read_run_summary
 

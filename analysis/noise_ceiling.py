@@ -59,9 +59,8 @@ import pandas as pd
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.bootstrap import Resampling, Statistic, bootstrap_ci
-from analysis.early_slope import kendall, spearman, top_recall
 from analysis.markdown import fmt_ci, markdown_table
+from analysis.stats import Resampling, Statistic, bootstrap_ci, kendall, spearman, top_recall
 from analysis.tables import require_columns
 from evo.retrain import RetrainConfig, RetrainError, Retraining, Settings, wall_seconds
 from evo.run import layout as files

@@ -232,10 +232,10 @@ def test_off_by_default_every_paper_config_gives_the_history_of_before(
 def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_so(
     early_reference: Path,
 ) -> None:
-    from analysis.bootstrap import Resampling
+    from analysis.ablation.report import ablation_tables
     from analysis.early_slope_report import study_robots
     from analysis.load import load_runs
-    from analysis.report import ablation_tables
+    from analysis.stats import Resampling
 
     robots = load_runs([early_reference]).robots
     stopped = robots[robots["status"] == "stopped-early"]
