@@ -38,7 +38,7 @@ from pathlib import Path
 from IPython.display import Image, Markdown, display
 
 from analysis import early_slope as es
-from analysis.early_slope_report import (
+from analysis.early_slope.report import (
     REJECTION_COLUMNS,
     correlation_table,
     early_slope_figures,

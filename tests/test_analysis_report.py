@@ -27,7 +27,7 @@ from readme_commands import ANALYSIS, REPO, Command, Made, copy_of_the_root, gro
 from readme_commands import run as run_command
 
 from analysis.ablation.report import ablation_tables, write_report
-from analysis.early_slope_report import write_early_slope_report
+from analysis.early_slope.report import write_early_slope_report
 from analysis.load import RunDirectoryError, launch_paths, load_runs
 from analysis.stats import Resampling
 from analysis.synthetic import synthetic_robots

@@ -233,7 +233,7 @@ def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_s
     early_reference: Path,
 ) -> None:
     from analysis.ablation.report import ablation_tables
-    from analysis.early_slope_report import study_robots
+    from analysis.early_slope.report import study_robots
     from analysis.load import load_runs
     from analysis.stats import Resampling
 

@@ -41,8 +41,11 @@ would have bred other offspring afterwards. :func:`analysis.noise_ceiling.noise_
 bounds what any predictor can reach: the rank agreement of the same structures trained
 twice.
 
-``python -m analysis.early_slope RUN... --out DIR`` writes the study's report
-(:mod:`analysis.early_slope_report`).
+This package is the study: these functions compute it; :mod:`analysis.early_slope.report`
+runs them on loaded runs (``early_slope_study``), writes the report
+(``write_early_slope_report``) and is its command line,
+``python -m analysis.early_slope RUN... --out DIR``; the notebook
+``analysis/early_slope.pct.py`` runs the same steps cell by cell.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """The early-slope study report: ``python -m analysis.early_slope RUN... --out DIR``.
 
 Does the start of a learning curve predict a robot's fitness (paper §8, §9)? This
-module runs :mod:`analysis.early_slope` on loaded runs and writes ``DIR/early_slope.md``
-with PNG figures beside it:
+module runs :mod:`analysis.early_slope` on loaded runs (the study's one computation,
+:func:`early_slope_study`) and writes ``DIR/early_slope.md`` with PNG figures beside it
+(:func:`write_early_slope_report`):
 
 * Spearman ρ and Kendall τ of each predictor (value, slope, area, fitted curve,
   value+slope) with the final fitness and with the return after the cut, per cut, each
