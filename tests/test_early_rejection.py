@@ -270,7 +270,7 @@ def test_the_equal_cost_report_counts_what_the_run_with_the_rule_saved_and_kept(
     """``analysis.equal_cost`` on a run with the rule and one without: its per-run
     figures are the runs' own (summary.json, population.json), a stopped robot is never
     a best or a member, and the report and figure are written."""
-    from analysis.equal_cost import main
+    from analysis.equal_cost.early_rejection import main
 
     assert main(["--without", str(serial_reference), "--with", str(early_reference),
                  "--out", str(tmp_path)]) == 0
@@ -304,7 +304,7 @@ def test_the_run_without_the_rule_is_read_at_the_env_steps_the_run_with_it_spent
 
 
 def test_the_paired_runs_part_where_their_robots_first_differ() -> None:
-    from analysis.equal_cost import parting_table
+    from analysis.equal_cost.early_rejection import parting_table
     from analysis.load import Runs
 
     def runs(names: list[str], status: list[str]) -> Runs:
