@@ -5,7 +5,8 @@ place:
 
 * :mod:`analysis.ablation.report`: the study's computation (``ablation_tables``), its
   writer (``write_report``: ``report.md``, CSVs and the paper's figures) and its command
-  line, ``python -m analysis.report RUN... --out DIR``;
+  line, ``python -m analysis.report RUN... --out DIR`` (or ``python -m analysis
+  ablation ...``);
 * :mod:`analysis.ablation.robot_level`: per-method summaries, rank tests and contrasts with
   the robot as the unit;
 * :mod:`analysis.ablation.nested` and :mod:`analysis.ablation.nested_report`: the same

@@ -1,4 +1,5 @@
-"""The ablation report (paper §8): ``python -m analysis.report RUN... --out DIR``.
+"""The ablation report (paper §8): ``python -m analysis.report RUN... --out DIR`` (or
+``python -m analysis ablation ...``).
 
 The study's one computation is :func:`ablation_tables` (every table, from a robots
 table), its writer :func:`write_report` and its command line :func:`main`. It reads run

@@ -44,8 +44,8 @@ twice.
 This package is the study: these functions compute it; :mod:`analysis.early_slope.report`
 runs them on loaded runs (``early_slope_study``), writes the report
 (``write_early_slope_report``) and is its command line,
-``python -m analysis.early_slope RUN... --out DIR``; the notebook
-``analysis/early_slope.pct.py`` runs the same steps cell by cell.
+``python -m analysis.early_slope RUN... --out DIR`` (or ``python -m analysis early_slope
+...``); the notebook ``analysis/early_slope.pct.py`` runs the same steps cell by cell.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The early-slope study report: ``python -m analysis.early_slope RUN... --out DIR``.
+"""The early-slope study report: ``python -m analysis.early_slope RUN... --out DIR`` (or
+``python -m analysis early_slope ...``).
 
 Does the start of a learning curve predict a robot's fitness (paper §8, §9)? This
 module runs :mod:`analysis.early_slope` on loaded runs (the study's one computation,

@@ -19,9 +19,10 @@ Its two uses, each with its computation, writer and command line:
 
 * :mod:`analysis.equal_cost.early_rejection`: runs with the early-rejection rule against
   runs without it, ``python -m analysis.equal_cost --without RUN... --with RUN... --out
-  DIR``;
+  DIR`` (or ``python -m analysis equal_cost ...``);
 * :mod:`analysis.equal_cost.inheritance`: runs with policy inheritance against runs
-  without it, ``python -m analysis.inheritance RUNS... --out DIR``.
+  without it, ``python -m analysis.inheritance RUNS... --out DIR`` (or
+  ``python -m analysis inheritance ...``).
 """
 
 from __future__ import annotations
