@@ -216,7 +216,7 @@ def early_rejection_tables(sides: dict[str, Runs]) -> EarlyRejectionTables:
         return EarlyRejectionTables(sides, trace, per_run, None)
     complete = {side: complete_runs(runs) for side, runs in sides.items()}
     kept = trace["run"].isin(done["side"] + "/" + done["run"].astype(str))
-    with_ = done[done["side"] == "with"]
+    with_ = done[done["side"] == "with"].drop_duplicates("seed")  # as equal_cost_table
     table = equal_cost_table(trace[kept], dict(zip(with_["seed"], with_["env_steps"],
                                                    strict=True)))
     comparison = Comparison(
