@@ -29,7 +29,8 @@
 # root above), not from `analysis/` where the kernel runs.
 #
 # Every number comes from the library functions the report uses
-# (`analysis.load`, `analysis.report`, `analysis.stats`, `analysis.plots`).
+# (`analysis.load`, the study's package `analysis.ablation`, `analysis.stats`,
+# `analysis.plots`).
 
 # %%
 import os
@@ -38,10 +39,10 @@ from pathlib import Path
 
 from IPython.display import Image, Markdown, display
 
-from analysis.bootstrap import Resampling
+from analysis.ablation.nested_report import nested_markdown
+from analysis.ablation.report import ablation_figures, ablation_tables, tests_markdown
 from analysis.load import launch_paths, load_runs
-from analysis.nested_report import nested_markdown
-from analysis.report import ablation_figures, ablation_tables, tests_markdown
+from analysis.stats import Resampling
 
 # %% tags=["parameters"]
 runs_path = os.environ.get("EVO_RUNS", "outputs/ablation")  # run dirs, os.pathsep-separated

@@ -38,8 +38,7 @@ from pathlib import Path
 from IPython.display import Image, Markdown, display
 
 from analysis import early_slope as es
-from analysis.bootstrap import Resampling
-from analysis.early_slope_report import (
+from analysis.early_slope.report import (
     REJECTION_COLUMNS,
     correlation_table,
     early_slope_figures,
@@ -47,6 +46,7 @@ from analysis.early_slope_report import (
     recall_table,
 )
 from analysis.load import launch_paths, load_retrained, load_runs
+from analysis.stats import Resampling
 
 # %% tags=["parameters"]
 runs_path = os.environ.get("EVO_RUNS", "outputs/ablation")  # run dirs, os.pathsep-separated

@@ -1,4 +1,5 @@
-"""Run directories into the tidy robots and curves tables of :mod:`analysis.tables`.
+"""The one loader: run directories into the tidy robots and curves tables of
+:mod:`analysis.tables`.
 
 :func:`load_runs` takes one or many paths. Each is a run directory (it holds
 ``history.csv``) or a folder holding run directories at any depth, such as a Hydra
@@ -29,6 +30,19 @@ Besides the schema columns, the robots table carries ``scheduled_budget``,
 (history's per-evaluation ``seed``) and ``curve_source``; the curves table carries
 every column the recording holds (``episode_length``, ``reward/...``, ``loss/...``,
 ``wall_seconds``, ...).
+
+**Committed copies.** A results folder commits only ``history.csv`` and
+``summary.json`` per run (``docs/results/<study>/runs/<run>/``). :func:`load_histories`
+reads such copies into the same :class:`Runs`, with an empty curves table (no
+learning-curve figures), so every table of a report, and the figures drawn from fitness
+alone, can be regenerated from what is committed:
+
+* the GA ``seed`` from ``config.yaml`` when the copy has one, else from the directory
+  name, which must end in ``seed<S>`` (``E+L_seed0``; :func:`run_setting`);
+* the initial population size from ``config.yaml``, else the GA default
+  (:data:`DEFAULT_POPULATION`);
+* ``complete`` from ``summary.json`` (a copy holds no lock: a run that was still
+  going when it was copied reads ``partial``).
 
 :func:`load_retrained` reads retrained structures for the noise ceiling
 (:func:`analysis.noise_ceiling.noise_ceiling`); :func:`launch_paths` reads the paths a
@@ -512,6 +526,76 @@ def _tidy_curves(curves: pd.DataFrame, robots: pd.DataFrame) -> pd.DataFrame:
     curves = curves.sort_values(["run", "birth", "env_steps"], kind="stable")
     rest = [c for c in curves.columns if c not in CURVE_COLUMNS and c != "birth"]
     return curves[[*CURVE_COLUMNS, *rest]].reset_index(drop=True)
+
+
+# ---------------------------------------------------------------- committed copies
+
+
+SEED_IN_NAME = re.compile(r"seed(\d+)$")
+
+
+def run_setting(run_dir: Path) -> tuple[int, int]:
+    """The GA seed and initial population size of a run copy.
+
+    Raises:
+        RunDirectoryError: If there is no ``config.yaml`` and the name gives no seed.
+    """
+    if RunLayout(run_dir).config.is_file():
+        config = read_config(run_dir)
+        seed = 0 if config.seed is None else config.seed
+        population = config.ga.get("population_size", DEFAULT_POPULATION)
+        return as_int(seed), as_int(population)
+    match = SEED_IN_NAME.search(run_dir.name)
+    if match is None:
+        raise RunDirectoryError(f"{run_dir}: no config.yaml and the name does not end in "
+                                "seed<S>; name the copy <method>_seed<S>")
+    return int(match.group(1)), DEFAULT_POPULATION
+
+
+def _complete(run_dir: Path) -> bool:
+    summary = _summary(run_dir)
+    return summary is not None and summary.complete
+
+
+def load_histories(paths: PathsLike, first: int | None = None) -> Runs:
+    """Read run copies' ``history.csv`` and ``summary.json`` (see the module docstring).
+
+    Args:
+        paths: Run directories, or folders holding them.
+        first: Keep only each run's first ``first`` robots; None keeps them all.
+
+    Returns:
+        The robots table, an empty curves table, one row per run and notes.
+
+    Raises:
+        FileNotFoundError: If a path does not exist.
+        RunDirectoryError: Naming the directory or file that cannot be read.
+    """
+    robots, runs = [], []
+    notes = ["Read from history.csv and summary.json only: no learning curves."]
+    dirs = find_run_dirs(paths)
+    for run, run_dir in zip(run_ids(dirs), dirs, strict=True):
+        seed, population = run_setting(run_dir)
+        history = read_history(run_dir)
+        table = robots_of_run(run, run_method(run_dir, history, RunConfig()), seed, history)
+        if first is not None:
+            kept = table[table["birth"] < first].reset_index(drop=True)
+            notes.append(f"run {run}: its first {len(kept)} robots of {len(table)}")
+            table = kept
+        table["curve_source"] = ""
+        complete = _complete(run_dir)
+        if not complete:
+            notes.append(f"run {run}: not complete when copied (summary.json), "
+                         f"{len(table)} robot(s) here")
+        robots.append(table)
+        runs.append(dict(run=run, method=table["method"].iloc[0] if len(table) else "",
+                         seed=seed, population_size=population, robots=len(table),
+                         complete=complete, status="complete" if complete else "partial",
+                         curves_mcap=0, curves_csv=0, curves_missing=len(table),
+                         path=str(run_dir)))
+    robots_table = pd.concat(robots, ignore_index=True)[[*ROBOT_COLUMNS, *EXTRA_ROBOT_COLUMNS]]
+    return Runs(robots_table, pd.DataFrame(columns=list(CURVE_COLUMNS)),
+                pd.DataFrame(runs, columns=list(RUN_COLUMNS)), notes)
 
 
 # ---------------------------------------------------------------- retrained structures

@@ -58,9 +58,9 @@ import pandas as pd
 import scipy.stats
 from numpy.typing import NDArray
 
-from analysis.bootstrap import Resampling, bootstrap_ci
 from analysis.evo_task import run_evo
 from analysis.markdown import fmt_ci, markdown_table
+from analysis.stats import Resampling, bootstrap_ci
 from analysis.tables import require_columns
 from evo.fidelity import (
     CLEAR_MARGIN,

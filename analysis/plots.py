@@ -1,4 +1,5 @@
-"""Figures of the paper, redrawn from a robots table and a curves table.
+"""The figures of every study: the paper's, redrawn from a robots table and a curves table,
+and those of the studies beyond it.
 
 Every function builds a :class:`matplotlib.figure.Figure` on the Agg canvas (no pyplot,
 no global state, no display needed), returns it, and writes a PNG when given ``path``.
@@ -9,7 +10,9 @@ no global state, no display needed), returns it, and writes a PNG when given ``p
   population's best and mean (Figs. 10, 12).
 * :func:`plot_learning_curves`: mean return during training of selected robots
   (Figs. 9, 11).
-* :func:`plot_best_so_far`: best fitness found against env steps spent, per run.
+* :func:`plot_cost_traces`: best fitness so far against env steps spent, one line per
+  run, the figure of every study that compares at equal cost; :func:`plot_best_so_far`,
+  the ablation's.
 * :func:`plot_rank_metrics`, :func:`plot_rejection_tradeoff`, :func:`plot_early_scatter`:
   the early-slope study (:mod:`analysis.early_slope`).
 * :func:`plot_seed_scatter`: fitness under one training seed against another, one point
@@ -20,7 +23,7 @@ no global state, no display needed), returns it, and writes a PNG when given ``p
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -174,29 +177,69 @@ def plot_learning_curves(
     return finish(fig, path)
 
 
+def plot_cost_traces(
+    trace: pd.DataFrame,
+    *,
+    by: str,
+    colors: Mapping[str, str],
+    legend: str = "{}",
+    panels: Sequence[tuple[str, str]] = (("best", "best fitness so far"),),
+    xlabel: str = "env steps (cumulative)",
+    mark: float | None = None,
+    path: str | Path | None = None,
+) -> Figure:
+    """Best fitness so far (and other figures of a run) against cumulative env steps, one
+    step line per run, coloured by its group: every best-so-far figure of the studies.
+
+    Args:
+        trace: :func:`analysis.population.cost_trace` of the runs (``run``, ``by``,
+            ``env_steps`` and the panels' columns); runs are drawn in the order they
+            first appear, so the last drawn lies on top.
+        by: The column that groups the runs (a method, an arm of a comparison).
+        colors: Group → colour (matplotlib's next colour for a group without one).
+        legend: The legend label of a group, ``legend.format(group)``, on the first run
+            of each group.
+        panels: Per axes, the column drawn and its y label.
+        xlabel: The x label of every axes.
+        mark: Env steps to mark with a dashed vertical line (labelled ``E``), or None.
+        path: PNG to write, or None.
+
+    Returns:
+        The figure: one axes per panel, one step line per run in each.
+    """
+    fig, axes = new_figure(len(panels))
+    labelled: set[str] = set()
+    for _, rows in trace.groupby("run", sort=False):
+        group = str(rows[by].iloc[0])
+        label = None if group in labelled else legend.format(group)
+        labelled.add(group)
+        for ax, (column, _) in zip(axes, panels, strict=True):
+            ax.step(rows["env_steps"], rows[column], where="post", color=colors.get(group),
+                    label=label)
+    for ax, (_, ylabel) in zip(axes, panels, strict=True):
+        if mark is not None:
+            ax.axvline(mark, color="grey", linestyle="--", label="E")
+        ax.set(xlabel=xlabel, ylabel=ylabel)
+    axes[0].legend(loc="lower right")
+    return finish(fig, path)
+
+
 def plot_best_so_far(robots: pd.DataFrame, *, path: str | Path | None = None) -> Figure:
-    """Best fitness so far against env steps spent so far, one line per run.
+    """Best fitness so far against env steps spent so far, one line per run
+    (:func:`plot_cost_traces` of :func:`analysis.population.best_so_far`).
 
     Args:
         robots: Robots table.
         path: PNG to write, or None.
 
     Returns:
-        The figure: one axes, one step line per run, coloured by method.
+        The figure: one axes, one step line per run, coloured by method, the methods in
+        :data:`analysis.tables.METHODS` order.
     """
     trace = best_so_far(robots)
-    fig, (ax,) = new_figure()
-    labelled: set[str] = set()
-    for method in method_order(trace["method"]):
-        for _, rows in trace[trace["method"] == method].groupby("run"):
-            ax.step(rows["env_steps"], rows["best"], where="post",
-                    color=METHOD_COLORS.get(method),
-                    label=None if method in labelled else method)
-            labelled.add(method)
-    ax.set(xlabel="env steps (cumulative)", ylabel="best fitness so far")
-    ax.legend(loc="lower right")
-    return finish(fig, path)
-
+    order = {m: i for i, m in enumerate(method_order(trace["method"]))}
+    trace = trace.sort_values("method", key=lambda m: m.map(order), kind="stable")
+    return plot_cost_traces(trace, by="method", colors=METHOD_COLORS, path=path)
 
 
 # ---------------------------------------------------------------- early-slope study

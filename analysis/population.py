@@ -1,4 +1,5 @@
-"""The GA population over a run, replayed from a robots table, and best-so-far traces.
+"""The GA population over a run, replayed from a robots table, and cost traces: the best
+fitness so far against the env steps spent.
 
 A steady-state GA keeps no per-generation snapshot in the robots table, but the table
 holds enough to replay it: the first ``population_size`` robots of a run form the
@@ -78,6 +79,31 @@ def _replay(rows: pd.DataFrame, population_size: int) -> tuple[pd.DataFrame, lis
     )), population
 
 
+def cost_trace(rows: pd.DataFrame, *, steps: str, best: str) -> pd.DataFrame:
+    """Every run's cumulative env steps and best fitness so far, row by row.
+
+    The one trace behind every best-so-far figure and every reading at equal cost
+    (:mod:`analysis.equal_cost`): what a run had found by the time it had spent so many
+    env steps.
+
+    Args:
+        rows: One row per evaluation with ``run``; each run's rows in the order the GA
+            applied them (birth order, or history.csv's row order).
+        steps: The column of the env steps each evaluation cost.
+        best: The column of a fitness: the robot's own, or its population's best after
+            it.
+
+    Returns:
+        ``rows`` with ``env_steps``, the env steps its run had spent up to and including
+        the row, and ``best``, the largest ``best`` of its run so far (NaN skipped).
+    """
+    trace = rows.copy()
+    by_run = trace.groupby("run", sort=False)
+    trace["env_steps"] = by_run[steps].cumsum()
+    trace["best"] = by_run[best].transform(lambda v: np.fmax.accumulate(v.to_numpy(float)))
+    return trace
+
+
 def best_so_far(robots: pd.DataFrame) -> pd.DataFrame:
     """Best fitness found so far against the env steps spent so far, per run.
 
@@ -87,12 +113,12 @@ def best_so_far(robots: pd.DataFrame) -> pd.DataFrame:
 
     Returns:
         ``run``, ``method``, ``seed``, ``birth``, ``env_steps`` (cumulative budget up to
-        and including this robot) and ``best`` (running maximum of fitness).
+        and including this robot) and ``best`` (running maximum of fitness): the
+        :func:`cost_trace` of the robots in birth order.
     """
     require_columns(robots, ("run", "method", "seed", "birth", "budget", "fitness"),
                     "robots table")
-    table = robots.sort_values(["run", "birth"])[["run", "method", "seed", "birth"]].copy()
-    ordered = robots.sort_values(["run", "birth"]).groupby("run", sort=False)
-    table["env_steps"] = ordered["budget"].cumsum()
-    table["best"] = ordered["fitness"].cummax()
-    return table.reset_index(drop=True)
+    rows = robots.sort_values(["run", "birth"])[["run", "method", "seed", "birth", "budget",
+                                                 "fitness"]]
+    trace = cost_trace(rows, steps="budget", best="fitness")
+    return trace[["run", "method", "seed", "birth", "env_steps", "best"]].reset_index(drop=True)

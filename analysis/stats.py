@@ -1,192 +1,316 @@
-"""Ablation statistics (paper §8): summaries with bootstrap CIs, tests and effect sizes.
+"""Intervals and tests every study shares: the bootstrap, t intervals, Holm, effect sizes.
 
-Every function takes a robots table (schema in :mod:`analysis.tables`: one row per
-evaluated robot with ``run``, ``method``, ``seed``, ``birth``, ``name``, ``budget``,
-``fitness``, ``accepted``, ``parents``) and compares the methods ``R+R``, ``R+L``,
-``E+R`` and ``E+L`` on one value column, ``fitness`` by default.
+* **The bootstrap.** :func:`bootstrap_ci` draws every bootstrap interval with
+  :func:`scipy.stats.bootstrap` (percentile method by default: it is defined for every
+  statistic used here, including ``max``, where BCa degenerates on ties). Randomness is
+  an explicit :class:`numpy.random.Generator`, carried with the level and the resample
+  count in one :class:`Resampling`.
+* **t intervals.** :func:`mean_interval`: the mean of one sample (or of paired
+  differences) with its t interval and the one-sample t-test; :func:`welch_contrast`: a
+  weighted sum of group means with unequal variances (Welch, Satterthwaite df), of which
+  Welch's two-sample test is the case ``(1, −1)``. Both return a :class:`Contrast`.
+* **Holm.** :func:`holm`: statsmodels' step-down adjustment, NaN-safe.
+* **Effect sizes and rank agreement.** :func:`vargha_delaney_a12` and its label;
+  :func:`spearman`, :func:`kendall` and :func:`top_recall`, vectorised for the
+  bootstrap.
 
-* :func:`summarize`: per method n, max, top-k mean, mean, median, IQM and std, each with
-  a bootstrap CI. The resampling unit is the robot, or the whole GA run for an evolved
-  method with several seeds (cluster bootstrap; see :mod:`analysis.bootstrap`).
-* :func:`kruskal_wallis` and :func:`pairwise_mann_whitney`: rank tests over robots, as
-  the paper compares robots; Holm's step-down adjustment (:func:`holm`) controls the
-  family-wise error of the pairwise family. ``per_run`` compares run-level aggregates
-  instead, which respects the GA run as the unit of replication when there are seeds
-  enough to test.
-* :func:`vargha_delaney_a12`: the probability that a robot of one method beats one of
-  another (ties count half).
-* :func:`interaction_contrast`: ``(E+L − R+L) − (E+R − R+R)`` on means, the paper's
-  claim that evolution helps only together with learning, with bootstrap CIs.
-* :data:`PAPER_ABLATION` and :func:`compare_with_paper`: the paper's reported numbers
-  beside ours. The paper's rewards come from its Unity task, so absolute values are
-  only roughly comparable; the ordering of the methods is what should reproduce.
-
-The std is the sample standard deviation (``ddof=1``); the IQM is the mean of the
-middle 50 % (:func:`scipy.stats.trim_mean` with 25 % cut from each end). A bootstrap
-interval of the max (and, less so, of the top-k mean) cannot reach above the largest
-robot seen: read it as how stable the estimate is under resampling, not as coverage of
-the best robot a method could find.
+**Resampling unit (decision).** Robots of a random-structure method (``R+R``, ``R+L``)
+are independent draws, so a robot is the unit. Robots of one evolved run (``E+R``,
+``E+L``) are not: offspring inherit their parents' subtrees, so their fitnesses are
+correlated and robot-level resampling would give intervals that are too narrow. When an
+evolved method has more than one GA seed, its unit is the whole run (a cluster
+bootstrap: draw seeds with replacement, keep all their robots). With a single seed there
+is nothing to resample at run level; robots are then the unit and the interval is
+descriptive of that one run, not of the method.
 """
 
 from __future__ import annotations
 
-import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import partial
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import pandas as pd
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
+from statsmodels.stats.multitest import multipletests
 
-from analysis.bootstrap import Resampling, Statistic, bootstrap_ci, resampling_units
-from analysis.tables import method_order, require_columns
+from analysis.tables import is_evolved, require_columns
+from evo.fidelity import Statistic
 
-# ---------------------------------------------------------------- point statistics
+CONFIDENCE = 0.95
+"""The level of every interval unless a caller asks for another."""
 
+# ---------------------------------------------------------------- the bootstrap
 
-def iqm(x: ArrayLike, axis: int = -1) -> Any:
-    """Interquartile mean: the mean of the middle 50 % (25 % trimmed from each end).
-
-    As in :func:`scipy.stats.trim_mean`, ``floor(0.25 n)`` values are cut at each end.
-
-    Args:
-        x: Values.
-        axis: Axis to reduce.
-
-    Returns:
-        The IQM (a float for 1-D input).
-    """
-    return scipy.stats.trim_mean(np.asarray(x, dtype=float), 0.25, axis=axis)
+# A statistic (evo.fidelity.Statistic) is ``f(*samples, axis=-1)``: it reduces each sample
+# along ``axis`` (vectorised) to a value, what a scipy or numpy reduction returns.
 
 
-def top_k_mean(x: ArrayLike, k: int = 5, axis: int = -1) -> Any:
-    """Mean of the ``k`` largest values (of all of them when there are fewer than ``k``).
+def resampling_units(rows: pd.DataFrame) -> NDArray[np.int64] | None:
+    """Cluster label per row for :func:`bootstrap_ci`, or None when every row is its own unit.
+
+    Rows of an evolved method with more than one seed share a label per ``(method,
+    seed)``; every other row gets a label of its own (see the module docstring).
 
     Args:
-        x: Values.
-        k: How many of the largest to average.
-        axis: Axis to reduce.
+        rows: Rows of a robots-like table with ``method`` and ``seed`` columns.
 
     Returns:
-        The top-k mean (a float for 1-D input).
+        Integer labels aligned with ``rows``, or None if no two rows share one.
     """
-    values = np.moveaxis(np.asarray(x, dtype=float), axis, -1)
-    return np.sort(values, axis=-1)[..., -k:].mean(axis=-1)
+    require_columns(rows, ("method", "seed"), "table to resample")
+    methods = rows["method"].to_numpy()
+    seeds = rows["seed"].to_numpy()
+    labels = np.arange(len(rows), dtype=np.int64)
+    clustered = np.zeros(len(rows), dtype=bool)
+    for method in pd.unique(methods):
+        mask = methods == method
+        if is_evolved(str(method)) and len(pd.unique(seeds[mask])) > 1:
+            clustered |= mask
+    if not clustered.any():
+        return None
+    keys = pd.Series(methods[clustered].astype(str)) + "\x00" + seeds[clustered].astype(str)
+    labels[clustered] = len(rows) + pd.factorize(keys)[0]
+    return labels
 
 
-def summary_statistics(k: int = 5) -> dict[str, Statistic]:
-    """The statistics :func:`summarize` reports, by name, each ``f(x, axis=-1)``."""
-    return {
-        "max": np.max,
-        f"top{k}_mean": partial(top_k_mean, k=k),
-        "mean": np.mean,
-        "median": np.median,
-        "iqm": iqm,
-        "std": partial(np.std, ddof=1),
-    }
+@dataclass(frozen=True)
+class Resampling:
+    """How every confidence interval of a study is drawn.
+
+    One value passed down instead of a generator, a level and a count at every layer.
+    Intervals drawn one after another consume the generator in turn, so a study with
+    the same seed gives the same intervals.
+
+    Attributes:
+        rng: Source of the resampling randomness.
+        confidence: Two-sided confidence level.
+        n_resamples: Bootstrap resamples per interval.
+        method: ``"percentile"``, ``"basic"`` or ``"BCa"`` (:func:`scipy.stats.bootstrap`).
+    """
+
+    rng: np.random.Generator
+    confidence: float = 0.95
+    n_resamples: int = 2000
+    method: str = "percentile"
+
+    @classmethod
+    def seeded(cls, seed: int, n_resamples: int = 2000) -> Resampling:
+        """Resampling from a fresh generator seeded with ``seed``."""
+        return cls(np.random.default_rng(seed), n_resamples=n_resamples)
 
 
-# ---------------------------------------------------------------- summary with CIs
+class _Options(TypedDict):
+    """The keyword arguments of :func:`scipy.stats.bootstrap` that a Resampling sets."""
+
+    n_resamples: int
+    confidence_level: float
+    method: str
+    rng: np.random.Generator
 
 
-def summarize(
-    robots: pd.DataFrame, resampling: Resampling, *, value: str = "fitness", k: int = 5
-) -> pd.DataFrame:
-    """Per method and statistic: the estimate and its bootstrap CI.
+def bootstrap_ci(
+    samples: Sequence[ArrayLike],
+    statistic: Statistic,
+    resampling: Resampling,
+    *,
+    units: Sequence[ArrayLike | None] | None = None,
+    paired: bool = False,
+) -> tuple[float, float]:
+    """Confidence interval of ``statistic(*samples)``, resampling rows or whole clusters.
 
     Args:
-        robots: Robots table.
-        resampling: How the intervals are drawn.
-        value: Column to summarise.
-        k: ``k`` of the top-k mean.
+        samples: One or more 1-D samples; with ``paired`` they have equal length and are
+            resampled together (rows of one table).
+        statistic: ``f(*samples, axis=-1)``; must accept ``axis`` and reduce along it.
+        resampling: Randomness, level and resample count.
+        units: Per sample, cluster labels (see :func:`resampling_units`) or None for
+            "each observation is a unit"; with ``paired`` only ``units[0]`` is used.
+        paired: Resample the samples' rows jointly (for correlations).
 
     Returns:
-        Long table with columns ``method``, ``statistic``, ``estimate``, ``ci_low``,
-        ``ci_high``, ``n`` (robots), ``n_seeds`` and ``unit`` (``"robot"`` or ``"run"``,
-        the resampling unit), methods in :data:`analysis.tables.METHODS` order.
+        ``(low, high)``; ``(nan, nan)`` when a sample has fewer than two units.
     """
-    require_columns(robots, ("method", "seed", value), "robots table")
-    rows = []
-    for method in method_order(robots["method"]):
-        group = robots[robots["method"] == method]
-        x = group[value].to_numpy(dtype=float)
-        units = resampling_units(group)
-        for name, stat in summary_statistics(k).items():
-            low, high = bootstrap_ci([x], stat, resampling, units=[units])
-            min_n = 2 if name == "std" else 1
-            estimate = float(stat(x, axis=-1)) if len(x) >= min_n else np.nan
-            rows.append(
-                dict(method=method, statistic=name, estimate=estimate, ci_low=low,
-                     ci_high=high, n=len(x), n_seeds=group["seed"].nunique(),
-                     unit="robot" if units is None else "run")
-            )
-    return pd.DataFrame(rows)
+    arrays = [np.asarray(s, dtype=float) for s in samples]
+    labels: list[ArrayLike | None] = [None] * len(arrays) if units is None else list(units)
+    if paired:
+        labels = labels[:1]  # one table: its rows share one labelling
+    elif len(labels) != len(arrays):
+        raise ValueError(f"got {len(arrays)} samples but {len(labels)} unit labellings")
+    if any(_n_units(a, u) < 2 for a, u in zip(arrays, labels, strict=False)):
+        return (np.nan, np.nan)
+    options = _Options(
+        n_resamples=resampling.n_resamples, confidence_level=resampling.confidence,
+        method=resampling.method, rng=resampling.rng,
+    )
+    if all(u is None for u in labels):
+        res = scipy.stats.bootstrap(
+            tuple(arrays), statistic, paired=paired, vectorized=True, axis=-1, **options
+        )
+    else:
+        data, clustered_statistic, vectorized = _cluster_resampler(
+            arrays, labels, statistic, paired
+        )
+        res = scipy.stats.bootstrap(
+            data, clustered_statistic, vectorized=vectorized, axis=-1, **options
+        )
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def _n_units(sample: NDArray[np.float64], labels: ArrayLike | None) -> int:
+    return len(sample) if labels is None else len(np.unique(np.asarray(labels)))
+
+
+def _cluster_resampler(
+    arrays: list[NDArray[np.float64]],
+    labels: list[ArrayLike | None],
+    statistic: Statistic,
+    paired: bool,
+) -> tuple[tuple[NDArray[np.int64], ...], Statistic, bool]:
+    """Recast the samples as cluster indices and ``statistic`` as a function of them.
+
+    scipy then resamples cluster indices; the wrapped statistic gathers the drawn
+    clusters' rows and evaluates the original statistic on them. When every sample's
+    clusters are of equal size (runs of equal length) the gather is vectorised over
+    resamples; otherwise the statistic runs once per resample.
+
+    Returns:
+        The cluster-index samples, the wrapped statistic and whether it is vectorised.
+    """
+    blocks = [np.column_stack(arrays)] if paired else [a[:, None] for a in arrays]
+    clusters: list[list[NDArray[np.float64]]] = []
+    for block, lab in zip(blocks, labels, strict=True):
+        codes = pd.factorize(np.arange(len(block)) if lab is None else np.asarray(lab))[0]
+        clusters.append([block[codes == c] for c in range(codes.max() + 1)])
+    data = tuple(np.arange(len(cl)) for cl in clusters)
+    if all(len({len(c) for c in cl}) == 1 for cl in clusters):
+        stacked = [np.stack(cl) for cl in clusters]  # (clusters, rows, columns)
+
+        def gathered(*indices: NDArray[np.int64], axis: int = -1) -> Any:
+            drawn = [st[ix].reshape(*ix.shape[:-1], -1, st.shape[-1])
+                     for st, ix in zip(stacked, indices, strict=True)]
+            return statistic(*(d[..., j] for d in drawn for j in range(d.shape[-1])), axis=-1)
+
+        return data, gathered, True
+
+    def concatenated(*indices: NDArray[np.int64]) -> float:
+        drawn = [np.concatenate([cl[int(i)] for i in ix])
+                 for cl, ix in zip(clusters, indices, strict=True)]
+        return float(statistic(*(col for d in drawn for col in d.T), axis=-1))
+
+    return data, concatenated, False
+
+
+# ---------------------------------------------------------------- t intervals
+
+
+@dataclass(frozen=True)
+class Contrast:
+    """An estimate (a mean, or a contrast of group means), its standard error, the t-test
+    of it against 0 and its two-sided t interval.
+
+    Attributes:
+        estimate: The mean, or ``Σ w_g mean_g``.
+        se: Its standard error.
+        df: Degrees of freedom of the t reference.
+        t: ``estimate / se``.
+        p: Two-sided p-value.
+        ci_low: Lower end of the two-sided interval.
+        ci_high: Upper end.
+    """
+
+    estimate: float
+    se: float
+    df: float
+    t: float
+    p: float
+    ci_low: float
+    ci_high: float
+
+    @classmethod
+    def from_t(cls, estimate: float, se: float, df: float, confidence: float = CONFIDENCE
+               ) -> Contrast:
+        """The test and interval of ``estimate`` with standard error ``se`` on ``df``."""
+        if se > 0:
+            t = estimate / se
+        else:  # no spread: any difference is certain, none is undefined
+            t = float(np.copysign(np.inf, estimate)) if estimate else np.nan
+        p = float(2 * scipy.stats.t.sf(abs(t), df))
+        half = float(scipy.stats.t.ppf(0.5 + confidence / 2, df)) * se
+        return cls(float(estimate), float(se), float(df), float(t), p,
+                   float(estimate - half), float(estimate + half))
+
+    @classmethod
+    def undefined(cls, estimate: float) -> Contrast:
+        """An estimate without a test or an interval (too few values)."""
+        return cls(float(estimate), *(np.nan,) * 6)
+
+
+def mean_interval(values: ArrayLike, confidence: float = CONFIDENCE) -> Contrast:
+    """The mean of the finite ``values`` with its t interval, and the one-sample t-test
+    against 0 (of paired differences: the paired t-test).
+
+    The interval is :func:`scipy.stats.t.interval` around the mean with
+    :func:`scipy.stats.sem` as its scale, the p-value :func:`scipy.stats.ttest_1samp`'s.
+
+    Returns:
+        The :class:`Contrast` on ``n − 1`` df; with fewer than two values the mean alone
+        (NaN when there is none), and when they all agree the mean as a point interval
+        with a NaN p (no spread: no test).
+    """
+    x = np.asarray(values, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) < 2:
+        return Contrast.undefined(float(x.mean()) if len(x) else np.nan)
+    mean, se = float(x.mean()), float(scipy.stats.sem(x))
+    if se == 0:
+        return Contrast(mean, 0.0, float(len(x) - 1), np.nan, np.nan, mean, mean)
+    low, high = scipy.stats.t.interval(confidence, len(x) - 1, loc=mean, scale=se)
+    test = scipy.stats.ttest_1samp(x, 0.0)
+    return Contrast(mean, se, float(len(x) - 1), float(test.statistic), float(test.pvalue),
+                    float(low), float(high))
+
+
+def welch_contrast(groups: Sequence[ArrayLike], weights: Sequence[float],
+                   confidence: float = CONFIDENCE) -> Contrast:
+    """Welch's test of a contrast of means with unequal variances (Satterthwaite df).
+
+    For two groups and weights ``(1, −1)`` this is Welch's two-sample t-test
+    (:func:`scipy.stats.ttest_ind` with ``equal_var=False``); scipy has no test of a
+    contrast of more groups (the ablation's interaction), so the formula is written
+    here once for all.
+
+    Args:
+        groups: One sample per group (each of two values or more).
+        weights: One weight per group.
+        confidence: Level of the interval.
+
+    Returns:
+        The contrast; NaN test and interval when a group has fewer than two values.
+    """
+    samples = [np.asarray(g, dtype=float) for g in groups]
+    w = np.asarray(weights, dtype=float)
+    estimate = float(sum(wi * s.mean() for wi, s in zip(w, samples, strict=True)))
+    if min(len(s) for s in samples) < 2:
+        return Contrast.undefined(estimate)
+    parts = np.array([wi**2 * s.var(ddof=1) / len(s) for wi, s in zip(w, samples, strict=True)])
+    se = float(np.sqrt(parts.sum()))
+    denominator = sum(v**2 / (len(s) - 1) for v, s in zip(parts, samples, strict=True))
+    df = float(parts.sum() ** 2 / denominator) if denominator > 0 else np.inf
+    return Contrast.from_t(estimate, se, df, confidence)
 
 
 # ---------------------------------------------------------------- tests and effect sizes
 
 
-@dataclass(frozen=True)
-class GroupTest:
-    """Result of a test across several methods."""
-
-    statistic: float
-    pvalue: float
-    methods: tuple[str, ...]
-
-
-def method_samples(
-    robots: pd.DataFrame, value: str = "fitness", per_run: str | None = None
-) -> dict[str, NDArray[np.float64]]:
-    """The values of each method, or each run's aggregate of them.
-
-    Args:
-        robots: Robots table.
-        value: Column to compare.
-        per_run: None to compare robots; an aggregation name (``"mean"``, ``"max"``, ...)
-            to compare one aggregate per run.
-
-    Returns:
-        Method → values, in :data:`analysis.tables.METHODS` order.
-    """
-    require_columns(robots, ("method", "run", value), "robots table")
-    table = robots
-    if per_run is not None:
-        table = robots.groupby(["method", "run"], as_index=False)[value].agg(per_run)
-    return {
-        m: table.loc[table["method"] == m, value].to_numpy(dtype=float)
-        for m in method_order(table["method"])
-    }
-
-
-def kruskal_wallis(
-    robots: pd.DataFrame, value: str = "fitness", per_run: str | None = None
-) -> GroupTest:
-    """Kruskal–Wallis H test that all methods share one distribution of ``value``.
-
-    Args:
-        robots: Robots table.
-        value: Column to compare.
-        per_run: See :func:`method_samples`.
-
-    Returns:
-        H statistic, p-value and the methods compared.
-    """
-    samples = method_samples(robots, value, per_run)
-    result = scipy.stats.kruskal(*samples.values())
-    return GroupTest(float(result.statistic), float(result.pvalue), tuple(samples))
-
-
 def holm(pvalues: ArrayLike) -> NDArray[np.float64]:
-    """Holm's step-down adjusted p-values (family-wise error control).
+    """Holm's step-down adjusted p-values (family-wise error control), by
+    :func:`statsmodels.stats.multitest.multipletests`.
 
-    Sort the m p-values ascending; the i-th smallest (i from 1) is multiplied by
-    ``m − i + 1``; a running maximum keeps the adjusted values monotone; all are capped
-    at 1. Rejecting where the adjusted value is ≤ α is Holm's procedure at level α.
-    NaN p-values stay NaN and do not count towards m.
+    Rejecting where the adjusted value is ≤ α is Holm's procedure at level α. NaN
+    p-values stay NaN and do not count towards the family's size.
 
     Args:
         pvalues: Raw p-values.
@@ -196,11 +320,9 @@ def holm(pvalues: ArrayLike) -> NDArray[np.float64]:
     """
     p = np.asarray(pvalues, dtype=float)
     adjusted = np.full_like(p, np.nan)
-    finite = np.flatnonzero(~np.isnan(p))
-    order = finite[np.argsort(p[finite], kind="stable")]
-    m = len(order)
-    stepped = np.maximum.accumulate((m - np.arange(m)) * p[order])
-    adjusted[order] = np.minimum(stepped, 1.0)
+    finite = ~np.isnan(p)
+    if finite.any():
+        adjusted[finite] = multipletests(p[finite], method="holm")[1]
     return adjusted
 
 
@@ -233,153 +355,7 @@ def a12_magnitude(a12: float) -> str:
     return "negligible"
 
 
-def pairwise_mann_whitney(
-    robots: pd.DataFrame,
-    value: str = "fitness",
-    *,
-    alpha: float = 0.05,
-    per_run: str | None = None,
-    pairs: Sequence[tuple[str, str]] | None = None,
-) -> pd.DataFrame:
-    """Two-sided Mann–Whitney U test and A12 for every pair of methods, Holm-adjusted.
+# ---------------------------------------------------------------- rank agreement
 
-    Args:
-        robots: Robots table.
-        value: Column to compare.
-        alpha: Family-wise error level for ``reject``.
-        per_run: See :func:`method_samples`.
-        pairs: The pairs ``(a, b)`` to test, one Holm family; None for every pair of
-            the methods present, in :data:`analysis.tables.METHODS` order.
-
-    Raises:
-        ValueError: If a method of ``pairs`` has no robots.
-
-    Returns:
-        One row per pair ``(a, b)`` with ``n_a``, ``n_b``, ``u`` (U of ``a``), ``p``,
-        ``p_holm``, ``reject`` (``p_holm <= alpha``), ``a12`` (a beats b) and
-        ``magnitude``.
-    """
-    samples = method_samples(robots, value, per_run)
-    absent = sorted({m for pair in pairs or () for m in pair} - set(samples))
-    if absent:
-        raise ValueError(f"robots table has no rows for method(s) {absent}")
-    rows = []
-    for a, b in itertools.combinations(samples, 2) if pairs is None else pairs:
-        x, y = samples[a], samples[b]
-        result = scipy.stats.mannwhitneyu(x, y, alternative="two-sided")
-        a12 = vargha_delaney_a12(x, y)
-        rows.append(dict(a=a, b=b, n_a=len(x), n_b=len(y), u=float(result.statistic),
-                         p=float(result.pvalue), a12=a12, magnitude=a12_magnitude(a12)))
-    table = pd.DataFrame(rows, columns=["a", "b", "n_a", "n_b", "u", "p", "a12", "magnitude"])
-    table.insert(6, "p_holm", holm(table["p"]))
-    table.insert(7, "reject", table["p_holm"] <= alpha)
-    return table
-
-
-# ---------------------------------------------------------------- contrasts
-
-
-def mean_contrast(
-    robots: pd.DataFrame,
-    weights: Mapping[str, float],
-    resampling: Resampling,
-    *,
-    value: str = "fitness",
-) -> tuple[float, float, float]:
-    """A weighted sum of method means, ``Σ w_m mean_m``, with a bootstrap CI.
-
-    Methods are resampled independently, each with its own unit (robot or run).
-
-    Args:
-        robots: Robots table.
-        weights: Method → weight; every method named must be in the table.
-        resampling: How the interval is drawn.
-        value: Column to compare.
-
-    Returns:
-        ``(estimate, ci_low, ci_high)``.
-
-    Raises:
-        ValueError: If a weighted method has no robots.
-    """
-    groups = {m: robots[robots["method"] == m] for m in weights}
-    empty = [m for m, g in groups.items() if g.empty]
-    if empty:
-        raise ValueError(f"robots table has no rows for method(s) {empty}")
-    w = np.array(list(weights.values()), dtype=float)
-
-    def contrast(*xs: NDArray[np.float64], axis: int = -1) -> Any:
-        return sum(wi * np.mean(xi, axis=axis) for wi, xi in zip(w, xs, strict=True))
-
-    samples = [g[value].to_numpy(dtype=float) for g in groups.values()]
-    units = [resampling_units(g) for g in groups.values()]
-    low, high = bootstrap_ci(samples, contrast, resampling, units=units)
-    return float(contrast(*samples)), low, high
-
-
-INTERACTION_CONTRASTS: dict[str, dict[str, float]] = {
-    "evolution without learning (E+R − R+R)": {"E+R": 1.0, "R+R": -1.0},
-    "evolution with learning (E+L − R+L)": {"E+L": 1.0, "R+L": -1.0},
-    "interaction (E+L − R+L) − (E+R − R+R)": {"E+L": 1.0, "R+L": -1.0, "E+R": -1.0, "R+R": 1.0},
-}
-
-
-def interaction_contrast(
-    robots: pd.DataFrame, resampling: Resampling, *, value: str = "fitness"
-) -> pd.DataFrame:
-    """Effect of evolution on mean fitness without and with learning, and their difference.
-
-    A positive interaction whose CI excludes 0 supports the paper's reading: evolving
-    structures pays off only when behaviours are learned.
-
-    Args:
-        robots: Robots table with all four methods.
-        resampling: How the intervals are drawn.
-        value: Column to compare.
-
-    Returns:
-        Rows ``contrast``, ``estimate``, ``ci_low``, ``ci_high``.
-    """
-    rows = [
-        (name, *mean_contrast(robots, weights, resampling, value=value))
-        for name, weights in INTERACTION_CONTRASTS.items()
-    ]
-    return pd.DataFrame(rows, columns=["contrast", "estimate", "ci_low", "ci_high"])
-
-
-# ---------------------------------------------------------------- the paper's numbers
-
-PAPER_ABLATION = pd.DataFrame(
-    [
-        ("R+R", "max", -0.47),
-        ("E+R", "max", -0.06),
-        ("R+L", "max", 1.90),
-        ("R+L", "mean", -0.52),
-        ("R+L", "std", 0.60),
-        ("E+L", "max", 2.47),
-        ("E+L", "mean", 0.50),
-        ("E+L", "std", 1.07),
-    ],
-    columns=["method", "statistic", "paper"],
-)
-"""Numbers the paper reports for its ablation (§8, Figs. 13–15; 30k steps per robot)."""
-
-
-def compare_with_paper(summary: pd.DataFrame) -> pd.DataFrame:
-    """The paper's reported numbers beside ours.
-
-    Args:
-        summary: Output of :func:`summarize`.
-
-    Returns:
-        One row per number in :data:`PAPER_ABLATION`: ``method``, ``statistic``,
-        ``paper``, ``ours``, ``ci_low``, ``ci_high`` and ``paper_in_ci`` (NaN-safe:
-        False where we have no estimate).
-    """
-    ours = summary[["method", "statistic", "estimate", "ci_low", "ci_high"]]
-    table = PAPER_ABLATION.merge(ours, on=["method", "statistic"], how="left")
-    table = table.rename(columns={"estimate": "ours"})
-    table["paper_in_ci"] = (table["ci_low"] <= table["paper"]) & (
-        table["paper"] <= table["ci_high"]
-    )
-    return table
+# The rank statistics (Spearman ρ, Kendall τ-b, top-k recall) are defined once, with the
+# fitness-fidelity statistics the noise sweep optimises (evo.fidelity), and used here.

@@ -56,7 +56,7 @@ METHODS: tuple[str, ...] = ("R+R", "R+L", "E+R", "E+L")
 EXTRA_METHODS: tuple[str, ...] = ("E+L+I",)
 """Arms beyond the paper's four, listed after them: ``E+L+I`` is E+L whose offspring
 start from a parent's trained policy (``ga.inheritance``). The paper's tests leave them
-out; each answers a question of its own (:data:`analysis.nested.EXTRA_PAIRS`)."""
+out; each answers a question of its own (:data:`analysis.ablation.nested.EXTRA_PAIRS`)."""
 
 ROBOT_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "birth", "name", "budget", "fitness", "accepted", "parents",

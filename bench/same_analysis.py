@@ -9,14 +9,18 @@ The earlier commit is checked out into ``OUT/tree`` (``git worktree``, as
 once per side in a folder of its own (``OUT/before/<name>``, ``OUT/after/<name>``) that
 holds a copy of its inputs under the same relative path, so that paths the outputs name
 are alike. The inputs are the working tree's committed files on both sides (the code is
-compared, not the data, some of which grew since), but for data that moved: the earlier
-side reads its own copy (the ablation runs were ``docs/results/ablation/runs`` before
-they were ``docs/results/ablation_100k/runs``), and a line says whether the two copies
+compared, not the data, some of which grew since), but for data that moved: an earlier
+commit that lacks the working tree's path reads its own copy (the 100k ablation's runs
+were ``docs/results/ablation/runs`` before they were ``docs/results/ablation_100k/runs``,
+and that path now holds the 13-seed ablation), and a line says whether the two copies
 are identical. The commands (``docs/results/*/README.md``):
 
 * ``report``: ``python -m analysis.report RUNS --history-only --first 60 --out OUT`` on
-  the ablation's committed ``history.csv`` and ``summary.json`` copies;
+  the 100k ablation's committed ``history.csv`` and ``summary.json`` copies;
 * ``power``: ``python -m analysis.power RUNS --history-only --first 60`` (what it prints);
+* ``ablation``, ``ablation_power``: the same two on the 13-seed ablation
+  (``docs/results/ablation/runs``), the power for its fifth arm's question
+  (``--pair E+L+I E+L``);
 * ``equal_cost``: ``python -m analysis.equal_cost --without .. --with .. --out OUT`` on
   ``docs/results/early_rejection/runs`` (each run given a ``config.yaml`` with its GA
   seed: see :class:`Input`);
@@ -93,7 +97,7 @@ class Input:
         at: Where the command finds it, relative to its folder.
         now: Its path in the working tree (what both sides read by default).
         before: Its path at the earlier commit, when it was elsewhere (the earlier side
-            reads that copy, where the commit has it).
+            reads that copy where the commit has it and lacks ``now``).
         seed_configs: Give each run directory ``seed<S>`` under it that has no
             ``config.yaml`` one that says ``seed: S`` (the committed copies of the
             early-rejection runs have none, and the equal-cost table reads the GA seed
@@ -124,12 +128,17 @@ class Command:
 
 
 ABLATION = Input("runs", RESULTS / "ablation_100k/runs", RESULTS / "ablation/runs")
+SEEDS_13 = Input("runs", RESULTS / "ablation/runs")
 EARLY = RESULTS / "early_rejection/runs"
 COMMANDS = (
     Command("report", ("-m", "analysis.report", "runs", "--history-only", "--first", "60",
                        "--out", "out"), (ABLATION,)),
     Command("power", ("-m", "analysis.power", "runs", "--history-only", "--first", "60"),
             (ABLATION,)),
+    Command("ablation", ("-m", "analysis.report", "runs", "--history-only", "--first", "60",
+                         "--out", "out"), (SEEDS_13,)),
+    Command("ablation_power", ("-m", "analysis.power", "runs", "--history-only", "--first",
+                               "60", "--pair", "E+L+I", "E+L"), (SEEDS_13,)),
     Command("equal_cost", ("-m", "analysis.equal_cost", "--without", "runs/paper_clean",
                            "--with", "runs/paper_clean_early", "--out", "out"),
             (Input("runs", EARLY, seed_configs=True),)),
@@ -181,7 +190,8 @@ def run(command: Command, tree: Path, folder: Path) -> str | None:
     folder.mkdir(parents=True)
     for given in command.inputs:
         source = REPO / given.now
-        if tree != REPO and given.before is not None and (tree / given.before).exists():
+        if (tree != REPO and given.before is not None and (tree / given.before).exists()
+                and not (tree / given.now).exists()):
             source = tree / given.before
             same = digests(source) == digests(REPO / given.now)
             print(f"{command.name}: reads {given.before} at the earlier commit, "

@@ -8,8 +8,9 @@ import pytest
 import scipy.stats
 
 from analysis import early_slope as es
-from analysis.bootstrap import Resampling
+from analysis.stats import Resampling
 from analysis.synthetic import synthetic_curves, synthetic_robots, with_curve_fitness
+from evo import fidelity
 
 
 def learning_runs(rng: np.random.Generator, *, seeds: tuple[int, ...] = (0,), n_robots: int = 30,
@@ -145,14 +146,14 @@ def test_cross_validated_linear_recovers_an_exact_linear_target() -> None:
 def test_rank_metrics_agree_with_scipy_and_hand_counts() -> None:
     rng = np.random.default_rng(5)
     x, y = rng.normal(size=25).round(1), rng.normal(size=25).round(1)
-    assert es.spearman(x, y) == pytest.approx(scipy.stats.spearmanr(x, y).statistic)
-    assert es.kendall(x, y) == pytest.approx(scipy.stats.kendalltau(x, y).statistic)
+    assert fidelity.spearman(x, y) == pytest.approx(scipy.stats.spearmanr(x, y).statistic)
+    assert fidelity.kendall(x, y) == pytest.approx(scipy.stats.kendalltau(x, y).statistic)
     ranks = np.arange(20.0)
-    assert es.top_recall(ranks, ranks) == 1.0
-    assert es.top_recall(-ranks, ranks) == 0.0
+    assert fidelity.top_recall(ranks, ranks) == 1.0
+    assert fidelity.top_recall(-ranks, ranks) == 0.0
     swapped = ranks.copy()
     swapped[[19, 0]] = swapped[[0, 19]]  # the best is predicted worst
-    assert es.top_recall(swapped, ranks) == 0.5  # top 2: one of two kept
+    assert fidelity.top_recall(swapped, ranks) == 0.5  # top 2: one of two kept
 
 
 # ---------------------------------------------------------------- early rejection

@@ -24,7 +24,7 @@ import pandas as pd
 import pytest
 import scipy.stats
 
-from analysis.inheritance import main
+from analysis.equal_cost.inheritance import main
 from evo.run.records import HistoryRow, RunSummary, write_history, write_run_summary
 
 Spec = list[tuple[float, int, str, str]]

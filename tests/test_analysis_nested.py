@@ -15,12 +15,12 @@ import pytest
 import scipy.stats
 from statsmodels.stats.power import TTestIndPower
 
-from analysis import nested, power, stats
-from analysis.bootstrap import Resampling
-from analysis.history_runs import load_histories
-from analysis.load import Runs
-from analysis.nested_report import write_nested_tables
-from analysis.report import ablation_markdown, ablation_tables, main
+from analysis import stats
+from analysis.ablation import nested, power, robot_level
+from analysis.ablation.nested_report import write_nested_tables
+from analysis.ablation.report import ablation_markdown, ablation_tables, main
+from analysis.load import Runs, load_histories
+from analysis.stats import Resampling
 from analysis.synthetic import synthetic_robots
 from evo.run.layout import RunLayout
 from evo.run.records import RunSummary, write_run_summary
@@ -53,11 +53,11 @@ def run_level_p(robots: pd.DataFrame) -> float:
     """Welch's test of E+L against R+L on run means (what :func:`nested.run_level_tests`
     runs per pair), without the tables around it, which these many studies do not need."""
     means = robots.groupby(["method", "run"])["fitness"].mean()
-    return nested.welch_contrast([means["E+L"], means["R+L"]], [1.0, -1.0]).p
+    return stats.welch_contrast([means["E+L"], means["R+L"]], [1.0, -1.0]).p
 
 
 def robot_level_p(robots: pd.DataFrame) -> float:
-    pairs = stats.pairwise_mann_whitney(robots).set_index(["a", "b"])
+    pairs = robot_level.pairwise_mann_whitney(robots).set_index(["a", "b"])
     return float(pairs.loc[("R+L", "E+L"), "p"])
 
 
@@ -67,14 +67,14 @@ def robot_level_p(robots: pd.DataFrame) -> float:
 def test_welch_contrast_of_two_groups_is_scipys_welch_test() -> None:
     rng = np.random.default_rng(0)
     a, b = rng.normal(1.0, 2.0, size=5), rng.normal(0.0, 0.5, size=7)
-    ours = nested.welch_contrast([a, b], [1.0, -1.0])
+    ours = stats.welch_contrast([a, b], [1.0, -1.0])
     theirs = scipy.stats.ttest_ind(a, b, equal_var=False)
     assert ours.t == pytest.approx(theirs.statistic)
     assert ours.p == pytest.approx(theirs.pvalue)
     assert ours.df == pytest.approx(theirs.df)
     low, high = theirs.confidence_interval()
     assert (ours.ci_low, ours.ci_high) == pytest.approx((low, high))
-    assert np.isnan(nested.welch_contrast([a, [1.0]], [1.0, -1.0]).p), "one value: no test"
+    assert np.isnan(stats.welch_contrast([a, [1.0]], [1.0, -1.0]).p), "one value: no test"
 
 
 def test_run_summaries_are_each_runs_mean_best_and_final_population() -> None:

@@ -26,10 +26,10 @@ from omegaconf import OmegaConf
 from readme_commands import ANALYSIS, REPO, Command, Made, copy_of_the_root, group, run_first
 from readme_commands import run as run_command
 
-from analysis.bootstrap import Resampling
-from analysis.early_slope_report import write_early_slope_report
+from analysis.ablation.report import ablation_tables, write_report
+from analysis.early_slope.report import write_early_slope_report
 from analysis.load import RunDirectoryError, launch_paths, load_runs
-from analysis.report import ablation_tables, write_report
+from analysis.stats import Resampling
 from analysis.synthetic import synthetic_robots
 from analysis.tables import CURVE_COLUMNS, METHODS, ROBOT_COLUMNS
 from evo.record import read_curve

@@ -8,8 +8,9 @@ import pytest
 import scipy.stats
 
 from analysis import stats
-from analysis.bootstrap import Resampling, bootstrap_ci, resampling_units
+from analysis.ablation import robot_level
 from analysis.population import best_so_far, population_trace
+from analysis.stats import Resampling, bootstrap_ci, resampling_units
 from analysis.synthetic import synthetic_robots
 from analysis.tables import require_columns
 
@@ -17,14 +18,14 @@ from analysis.tables import require_columns
 
 
 def test_iqm_is_the_mean_of_the_middle_half() -> None:
-    assert stats.iqm([1, 2, 3, 4, 5, 6, 7, 100]) == pytest.approx(4.5)  # mean of 3..6
-    assert stats.iqm(np.arange(10)) == pytest.approx(4.5)  # cuts 2 each end: mean of 2..7
-    assert stats.iqm([[0, 1, 2, 3], [4, 4, 8, 8]]).tolist() == pytest.approx([1.5, 6.0])
+    assert robot_level.iqm([1, 2, 3, 4, 5, 6, 7, 100]) == pytest.approx(4.5)  # mean of 3..6
+    assert robot_level.iqm(np.arange(10)) == pytest.approx(4.5)  # cuts 2 each end: mean of 2..7
+    assert robot_level.iqm([[0, 1, 2, 3], [4, 4, 8, 8]]).tolist() == pytest.approx([1.5, 6.0])
 
 
 def test_top_k_mean_takes_the_largest_k() -> None:
-    assert stats.top_k_mean([5, 1, 4, 2, 3], k=2) == pytest.approx(4.5)
-    assert stats.top_k_mean([1.0, 2.0], k=5) == pytest.approx(1.5), "fewer than k: all"
+    assert robot_level.top_k_mean([5, 1, 4, 2, 3], k=2) == pytest.approx(4.5)
+    assert robot_level.top_k_mean([1.0, 2.0], k=5) == pytest.approx(1.5), "fewer than k: all"
 
 
 # ---------------------------------------------------------------- bootstrap
@@ -95,7 +96,7 @@ def ablation() -> pd.DataFrame:
 
 
 def test_summary_reports_every_statistic_with_a_ci(ablation: pd.DataFrame) -> None:
-    summary = stats.summarize(ablation, Resampling.seeded(0, 300))
+    summary = robot_level.summarize(ablation, Resampling.seeded(0, 300))
     assert list(summary["method"].unique()) == ["R+R", "R+L", "E+R", "E+L"]
     assert set(summary["statistic"]) == {"max", "top5_mean", "mean", "median", "iqm", "std"}
     assert (summary["n"] == 60).all() and (summary["n_seeds"] == 3).all()
@@ -113,8 +114,8 @@ def test_summary_reports_every_statistic_with_a_ci(ablation: pd.DataFrame) -> No
 
 
 def test_compare_with_paper_lists_the_reported_numbers(ablation: pd.DataFrame) -> None:
-    summary = stats.summarize(ablation, Resampling.seeded(0, 200))
-    table = stats.compare_with_paper(summary)
+    summary = robot_level.summarize(ablation, Resampling.seeded(0, 200))
+    table = robot_level.compare_with_paper(summary)
     assert len(table) == 8
     paper = table.set_index(["method", "statistic"])["paper"]
     assert paper[("E+L", "max")] == 2.47 and paper[("R+L", "std")] == 0.60
@@ -153,8 +154,8 @@ def test_a12_equals_normalised_mann_whitney_u() -> None:
 
 
 def test_planted_difference_is_significant(ablation: pd.DataFrame) -> None:
-    assert stats.kruskal_wallis(ablation).pvalue < 1e-6
-    pairs = stats.pairwise_mann_whitney(ablation).set_index(["a", "b"])
+    assert robot_level.kruskal_wallis(ablation).pvalue < 1e-6
+    pairs = robot_level.pairwise_mann_whitney(ablation).set_index(["a", "b"])
     for other in ("R+R", "R+L", "E+R"):
         assert pairs.loc[(other, "E+L"), "reject"], f"E+L was planted above {other}"
     assert pairs.loc[("R+R", "E+L"), "a12"] < 0.25, "E+L beats R+R most of the time"
@@ -167,13 +168,13 @@ def test_null_differences_are_rarely_significant() -> None:
     methods = np.repeat(["R+R", "E+R", "E+L"], 30)
     tables = [pd.DataFrame(dict(method=methods, run=methods, fitness=rng.normal(size=90)))
               for _ in range(200)]
-    any_rejected = [stats.pairwise_mann_whitney(t)["reject"].any() for t in tables]
-    kruskal_rejected = [stats.kruskal_wallis(t).pvalue <= 0.05 for t in tables]
+    any_rejected = [robot_level.pairwise_mann_whitney(t)["reject"].any() for t in tables]
+    kruskal_rejected = [robot_level.kruskal_wallis(t).pvalue <= 0.05 for t in tables]
     assert np.mean(any_rejected) < 0.1 and np.mean(kruskal_rejected) < 0.1
 
 
 def test_per_run_tests_compare_one_value_per_run(ablation: pd.DataFrame) -> None:
-    pairs = stats.pairwise_mann_whitney(ablation, per_run="mean")
+    pairs = robot_level.pairwise_mann_whitney(ablation, per_run="mean")
     assert (pairs["n_a"] == 3).all() and (pairs["n_b"] == 3).all()
 
 
@@ -181,7 +182,7 @@ def test_interaction_contrast_recovers_planted_means() -> None:
     rng = np.random.default_rng(5)
     means = {"R+R": 0.0, "R+L": 1.0, "E+R": 0.0, "E+L": 3.0}  # interaction = 2
     robots = synthetic_robots(rng, means=means, seeds=(0, 1, 2, 3), n_robots=25, sd=0.3)
-    table = stats.interaction_contrast(robots, Resampling(rng, n_resamples=500))
+    table = robot_level.interaction_contrast(robots, Resampling(rng, n_resamples=500))
     table = table.set_index("contrast")
     row = table.loc["interaction (E+L − R+L) − (E+R − R+R)"]
     group_means = robots.groupby("method")["fitness"].mean()
@@ -196,7 +197,7 @@ def test_interaction_contrast_recovers_planted_means() -> None:
 def test_contrast_names_a_missing_method() -> None:
     robots = synthetic_robots(np.random.default_rng(0), means={"R+R": 0.0}, n_robots=5)
     with pytest.raises(ValueError, match="no rows for method"):
-        stats.interaction_contrast(robots, Resampling.seeded(0))
+        robot_level.interaction_contrast(robots, Resampling.seeded(0))
 
 
 # ---------------------------------------------------------------- population replay

@@ -233,10 +233,10 @@ def test_off_by_default_every_paper_config_gives_the_history_of_before(
 def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_so(
     early_reference: Path,
 ) -> None:
-    from analysis.bootstrap import Resampling
-    from analysis.early_slope_report import study_robots
+    from analysis.ablation.report import ablation_tables
+    from analysis.early_slope.report import study_robots
     from analysis.load import load_runs
-    from analysis.report import ablation_tables
+    from analysis.stats import Resampling
 
     robots = load_runs([early_reference]).robots
     stopped = robots[robots["status"] == "stopped-early"]
@@ -271,7 +271,7 @@ def test_the_equal_cost_report_counts_what_the_run_with_the_rule_saved_and_kept(
     """``analysis.equal_cost`` on a run with the rule and one without: its per-run
     figures are the runs' own (summary.json, population.json), a stopped robot is never
     a best or a member, and the report and figure are written."""
-    from analysis.equal_cost import main
+    from analysis.equal_cost.early_rejection import main
 
     assert main(["--without", str(serial_reference), "--with", str(early_reference),
                  "--out", str(tmp_path)]) == 0
@@ -305,7 +305,7 @@ def test_the_run_without_the_rule_is_read_at_the_env_steps_the_run_with_it_spent
 
 
 def test_the_paired_runs_part_where_their_robots_first_differ() -> None:
-    from analysis.equal_cost import parting_table
+    from analysis.equal_cost.early_rejection import parting_table
     from analysis.load import Runs
 
     def runs(names: list[str], status: list[str]) -> Runs:

@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 
 from analysis import noise_ceiling as nc
-from analysis.bootstrap import Resampling
 from analysis.noise_study import main as study_main
+from analysis.stats import Resampling
 from evo import fidelity
 from evo.retrain import Entry, confirmation_plan, late_fitness, plan_trainings
 from evo.robot import load_robot, parse_robot, save_robot
@@ -247,8 +247,8 @@ def test_a_folder_of_other_settings_is_refused(
 def test_the_early_slope_study_reads_a_noise_ceiling_folder(
     ceiling_run: tuple[Path, dict[str, str]],
 ) -> None:
-    from analysis.bootstrap import Resampling
     from analysis.load import load_retrained
+    from analysis.stats import Resampling
 
     out, _ = ceiling_run
     retrained = load_retrained([out])

@@ -16,9 +16,9 @@ import torch
 from test_evolution import ENV, TINY, main_cmd
 
 import evo.envs  # noqa: F401 - registers evo/Reach-v0
-from analysis.early_slope_report import main as early_slope_main
+from analysis.ablation.report import main as report_main
+from analysis.early_slope.report import main as early_slope_main
 from analysis.load import load_runs
-from analysis.report import main as report_main
 from evo.envs.params import TaskParams, observation_size
 from evo.learners.common import load_checkpoint
 from evo.replay import main as replay_main

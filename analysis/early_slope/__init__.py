@@ -31,8 +31,9 @@ batches with ``env_steps`` at or below the cut. Batches that completed no episod
 the prefix is part of it, which gives every predictor a head start. ``after_cut``: the
 mean return of the episodes completed after the cut, the part still unseen at the cut.
 
-**Metrics** (:func:`rank_metrics`): Spearman ρ, Kendall τ-b and top-10 % recall, each
-with a paired bootstrap CI whose unit follows :mod:`analysis.bootstrap`.
+**Metrics** (:func:`rank_metrics`): Spearman ρ, Kendall τ-b and top-10 % recall
+(:mod:`analysis.stats`), each with a paired bootstrap CI whose unit follows
+:func:`analysis.stats.resampling_units`.
 :func:`rejection_tradeoff` prices an early-rejection rule: env steps saved against how
 many of the final top-k robots it would have thrown away. It is an offline, first-order
 estimate: it keeps the rest of each run as it happened, whereas a GA that rejects early
@@ -40,26 +41,24 @@ would have bred other offspring afterwards. :func:`analysis.noise_ceiling.noise_
 bounds what any predictor can reach: the rank agreement of the same structures trained
 twice.
 
-``python -m analysis.early_slope RUN... --out DIR`` writes the study's report
-(:mod:`analysis.early_slope_report`).
+This package is the study: these functions compute it; :mod:`analysis.early_slope.report`
+runs them on loaded runs (``early_slope_study``), writes the report
+(``write_early_slope_report``) and is its command line,
+``python -m analysis.early_slope RUN... --out DIR`` (or ``python -m analysis early_slope
+...``); the notebook ``analysis/early_slope.pct.py`` runs the same steps cell by cell.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from functools import partial
-from typing import Any
 
 import numpy as np
 import pandas as pd
-import scipy.integrate
-import scipy.optimize
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.bootstrap import Resampling, Statistic, bootstrap_ci, resampling_units
 from analysis.population import population_trace
+from analysis.stats import Resampling, bootstrap_ci, resampling_units
 from analysis.tables import CURVE_COLUMNS, require_columns
 from evo.early_rejection import (  # noqa: F401 - the predictors, shared with the GA
     RATE_BOUNDS,
@@ -71,6 +70,7 @@ from evo.early_rejection import (  # noqa: F401 - the predictors, shared with th
     saturating_extrapolation,
     value_at_cut,
 )
+from evo.fidelity import Statistic, kendall, spearman, top_recall
 
 FRACTIONS: tuple[float, ...] = (0.1, 0.2, 0.3, 0.5, 0.75)
 PREDICTORS: tuple[str, ...] = ("value", "slope", "area", "curve", "value+slope")
@@ -263,45 +263,6 @@ def predictions(
 
 
 # ---------------------------------------------------------------- metrics
-
-
-def spearman(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
-    """Spearman ρ along ``axis`` (Pearson correlation of average ranks)."""
-    rx = scipy.stats.rankdata(x, axis=axis)
-    ry = scipy.stats.rankdata(y, axis=axis)
-    return scipy.stats.pearsonr(rx, ry, axis=axis).statistic
-
-
-def kendall(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
-    """Kendall τ-b along ``axis``."""
-    return scipy.stats.kendalltau(x, y, axis=axis).statistic
-
-
-def top_recall(prediction: ArrayLike, actual: ArrayLike, share: float = 0.1,
-               axis: int = -1) -> Any:
-    """Share of the actual top ``ceil(share·n)`` that the prediction also puts on top.
-
-    Ties are broken by position, so duplicates drawn by a bootstrap count separately.
-
-    Args:
-        prediction: Predicted values.
-        actual: Actual values, aligned with ``prediction``.
-        share: Size of the top as a share of the robots (at least one robot).
-        axis: Axis along which robots lie.
-
-    Returns:
-        Recall in [0, 1] (an array when the inputs have more dimensions).
-    """
-    p = np.moveaxis(np.asarray(prediction, dtype=float), axis, -1)
-    a = np.moveaxis(np.asarray(actual, dtype=float), axis, -1)
-    n = p.shape[-1]
-    k = max(1, math.ceil(share * n))
-
-    def on_top(v: NDArray[np.float64]) -> NDArray[np.bool_]:
-        ranks = np.argsort(np.argsort(v, axis=-1, kind="stable"), axis=-1)
-        return np.asarray(ranks >= n - k, dtype=bool)
-
-    return (on_top(p) & on_top(a)).sum(axis=-1) / k
 
 
 def rank_metrics(preds: pd.DataFrame, resampling: Resampling, *, share: float = 0.1

@@ -1,8 +1,9 @@
 """``python -m analysis.early_slope RUN... --out DIR``: the early-slope report
-(``analysis.early_slope_report``)."""
+(:mod:`analysis.early_slope.report`)."""
 
 import sys
 
-from analysis.early_slope_report import main
+from analysis.early_slope.report import main
 
-sys.exit(main())
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,8 +1,10 @@
-"""The early-slope study report: ``python -m analysis.early_slope RUN... --out DIR``.
+"""The early-slope study report: ``python -m analysis.early_slope RUN... --out DIR`` (or
+``python -m analysis early_slope ...``).
 
 Does the start of a learning curve predict a robot's fitness (paper §8, §9)? This
-module runs :mod:`analysis.early_slope` on loaded runs and writes ``DIR/early_slope.md``
-with PNG figures beside it:
+module runs :mod:`analysis.early_slope` on loaded runs (the study's one computation,
+:func:`early_slope_study`) and writes ``DIR/early_slope.md`` with PNG figures beside it
+(:func:`write_early_slope_report`):
 
 * Spearman ρ and Kendall τ of each predictor (value, slope, area, fitted curve,
   value+slope) with the final fitness and with the return after the cut, per cut, each
@@ -34,11 +36,11 @@ from matplotlib.figure import Figure
 
 from analysis import early_slope as es
 from analysis import plots
-from analysis.bootstrap import Resampling
+from analysis.cli import parser, report_folder, resampling_of, run_report
 from analysis.load import RunDirectoryError, Runs, load_retrained, load_runs
 from analysis.markdown import figure_link, fmt_ci, markdown_table
 from analysis.noise_ceiling import noise_ceiling
-from analysis.report import parser, report_folder, resampling_of, run_report
+from analysis.stats import Resampling
 from analysis.tables import fully_trained, method_order
 
 REPORT = "early_slope.md"

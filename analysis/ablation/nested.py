@@ -10,7 +10,7 @@ effect). This module answers the ablation's questions with the run as the unit:
   :mod:`analysis.population`).
 * :func:`run_level_tests`: per question (:data:`PAIRS` and the interaction of
   :data:`INTERACTION`, then :data:`EXTRA_PAIRS`), a Welch t-test on one summary per
-  run, Holm over the paper's pairs only.
+  run (:func:`analysis.stats.welch_contrast`), Holm over the paper's pairs only.
   Welch, not Mann–Whitney: with three runs against three a rank test cannot go below
   p = 0.1, and the per-method spread of run means differs by a factor of ten or more
   between the methods, which the pooled t-test would ignore.
@@ -22,7 +22,7 @@ effect). This module answers the ablation's questions with the run as the unit:
   residual variance, and the methods' spreads differ); the interaction on all four.
 * :func:`variance_components`: per method, the within-run and between-run standard
   deviations (one-way random-effects ANOVA, method of moments), the input of
-  :mod:`analysis.power`.
+  :mod:`analysis.ablation.power`.
 """
 
 from __future__ import annotations
@@ -34,13 +34,11 @@ from typing import NotRequired, TypedDict, TypeVar
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 import statsmodels.formula.api as smf
-from numpy.typing import ArrayLike
 from statsmodels.tools.sm_exceptions import ConvergenceWarning
 
 from analysis.population import final_population
-from analysis.stats import holm
+from analysis.stats import Contrast, holm, mean_interval, welch_contrast
 from analysis.tables import method_order, require_columns
 
 PAIRS: tuple[tuple[str, str], ...] = (("E+L", "R+L"), ("R+L", "E+R"), ("E+R", "R+R"))
@@ -116,69 +114,6 @@ def run_summaries(
 
 
 # ---------------------------------------------------------------- Welch on run summaries
-
-
-@dataclass(frozen=True)
-class Contrast:
-    """A contrast of group means, its standard error, test and interval.
-
-    Attributes:
-        estimate: ``Σ w_g mean_g``.
-        se: Its standard error.
-        df: Degrees of freedom of the t reference.
-        t: ``estimate / se``.
-        p: Two-sided p-value.
-        ci_low: Lower end of the two-sided interval.
-        ci_high: Upper end.
-    """
-
-    estimate: float
-    se: float
-    df: float
-    t: float
-    p: float
-    ci_low: float
-    ci_high: float
-
-    @classmethod
-    def from_t(cls, estimate: float, se: float, df: float, confidence: float = 0.95
-               ) -> Contrast:
-        """The test and interval of ``estimate`` with standard error ``se`` on ``df``."""
-        if se > 0:
-            t = estimate / se
-        else:  # no spread: any difference is certain, none is undefined
-            t = float(np.copysign(np.inf, estimate)) if estimate else np.nan
-        p = float(2 * scipy.stats.t.sf(abs(t), df))
-        half = float(scipy.stats.t.ppf(0.5 + confidence / 2, df)) * se
-        return cls(float(estimate), float(se), float(df), float(t), p,
-                   float(estimate - half), float(estimate + half))
-
-
-def welch_contrast(groups: Sequence[ArrayLike], weights: Sequence[float],
-                   confidence: float = 0.95) -> Contrast:
-    """Welch's test of a contrast of means with unequal variances (Satterthwaite df).
-
-    For two groups and weights ``(1, −1)`` this is Welch's two-sample t-test
-    (:func:`scipy.stats.ttest_ind` with ``equal_var=False``).
-
-    Args:
-        groups: One sample per group (each of two values or more).
-        weights: One weight per group.
-        confidence: Level of the interval.
-
-    Returns:
-        The contrast; NaN test and interval when a group has fewer than two values.
-    """
-    samples = [np.asarray(g, dtype=float) for g in groups]
-    w = np.asarray(weights, dtype=float)
-    estimate = float(sum(wi * s.mean() for wi, s in zip(w, samples, strict=True)))
-    if min(len(s) for s in samples) < 2:
-        return Contrast(estimate, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan)
-    parts = np.array([wi**2 * s.var(ddof=1) / len(s) for wi, s in zip(w, samples, strict=True)])
-    se = float(np.sqrt(parts.sum()))
-    denominator = sum(v**2 / (len(s) - 1) for v, s in zip(parts, samples, strict=True))
-    df = float(parts.sum() ** 2 / denominator) if denominator > 0 else np.inf
-    return Contrast.from_t(estimate, se, df, confidence)
 
 
 class HolmRow(TypedDict):
@@ -280,8 +215,8 @@ def run_level_means(runs: pd.DataFrame, summary: str = "mean",
     """
     rows = []
     for method in method_order(runs["method"]):
-        c = welch_contrast([runs.loc[runs["method"] == method, summary]], [1.0], confidence)
         x = runs.loc[runs["method"] == method, summary]
+        c = mean_interval(x, confidence)
         rows.append(dict(method=method, runs=len(x), estimate=c.estimate, ci_low=c.ci_low,
                          ci_high=c.ci_high, sd=float(x.std(ddof=1)) if len(x) > 1 else np.nan))
     return pd.DataFrame(rows, columns=["method", "runs", "estimate", "ci_low", "ci_high", "sd"])

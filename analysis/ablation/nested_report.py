@@ -1,10 +1,10 @@
-"""The ablation report's sections with the GA run as the unit (:mod:`analysis.nested`).
+"""The ablation report's sections with the GA run as the unit (:mod:`analysis.ablation.nested`).
 
 :func:`nested_tables` computes them from a robots table; :func:`nested_markdown`
-writes them; :func:`analysis.report.ablation_tables` and
-:func:`analysis.report.ablation_markdown` call both. Each question of the ablation
-(:data:`analysis.nested.PAIRS` and the interaction, and E+L+I vs E+L when the fifth arm
-is there: :data:`analysis.nested.EXTRA_PAIRS`) gets one answering test, Welch's t-test
+writes them; :func:`analysis.ablation.report.ablation_tables` and
+:func:`analysis.ablation.report.ablation_markdown` call both. Each question of the ablation
+(:data:`analysis.ablation.nested.PAIRS` and the interaction, and E+L+I vs E+L when the fifth arm
+is there: :data:`analysis.ablation.nested.EXTRA_PAIRS`) gets one answering test, Welch's t-test
 on the runs' mean fitness, and the mixed model beside it.
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis import nested, power
+from analysis.ablation import nested, power
 from analysis.markdown import fmt_ci, fmt_number, markdown_table
 from analysis.tables import EXTRA_METHODS, method_order
 
@@ -30,12 +30,12 @@ class NestedTables:
     """The run-level tables of the report.
 
     Attributes:
-        runs: :func:`analysis.nested.run_summaries`.
+        runs: :func:`analysis.ablation.nested.run_summaries`.
         means: Per method and run summary, the mean over runs with a t interval.
-        run_tests: :func:`analysis.nested.run_level_tests`.
-        mixed: :func:`analysis.nested.mixed_model_tests`.
-        components: :func:`analysis.nested.variance_components`.
-        power: :func:`analysis.power.power_table` for :data:`POWER_PAIR`, or None.
+        run_tests: :func:`analysis.ablation.nested.run_level_tests`.
+        mixed: :func:`analysis.ablation.nested.mixed_model_tests`.
+        components: :func:`analysis.ablation.nested.variance_components`.
+        power: :func:`analysis.ablation.power.power_table` for :data:`POWER_PAIR`, or None.
         notes: Sentences on what was left out.
     """
 

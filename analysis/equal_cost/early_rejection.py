@@ -1,4 +1,5 @@
-"""Early rejection at equal cost: evolution runs with the rule against runs without it.
+"""Early rejection at equal cost: evolution runs with the rule against runs without it
+(a use of the comparison of :mod:`analysis.equal_cost`).
 
     python -m analysis.equal_cost --without runs/paper_clean --with runs/paper_clean_early \\
         --out docs/results/early_rejection
@@ -20,7 +21,9 @@ It writes ``OUT/equal_cost.md`` with ``equal_cost.png`` and ``equal_cost_runs.cs
 
 Fitness here is a fully trained robot's (an offspring stopped early never enters the
 population, so its fitness so far is never a population member or a best); each
-figure comes from replaying the steady state (:mod:`analysis.population`).
+figure comes from replaying the steady state (:mod:`analysis.population`), in birth
+order. :func:`early_rejection_tables` computes every table, :func:`write_equal_cost`
+writes them, :func:`main` is the command line.
 """
 
 from __future__ import annotations
@@ -29,36 +32,38 @@ import argparse
 import dataclasses
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import scipy.stats
-from matplotlib.figure import Figure
-from numpy.typing import NDArray
 
-from analysis import plots, stats
+from analysis.cli import report_folder, run_report
+from analysis.equal_cost import ARMS as SIDES
+from analysis.equal_cost import equal_cost_table, plot_equal_cost
 from analysis.load import Runs, load_runs
-from analysis.markdown import figure_link, fmt_ci, markdown_table
-from analysis.population import final_population, population_trace
-from analysis.report import report_folder, run_report
+from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table
+from analysis.population import cost_trace, final_population, population_trace
+from analysis.stats import Contrast, a12_magnitude, mean_interval, vargha_delaney_a12
 
 REPORT = "equal_cost.md"
-SIDES = ("without", "with")
-"""The two sides: runs without the rule, then runs with it."""
-SIDE_COLORS = {"without": "tab:blue", "with": "tab:red"}
 FIGURES = ("best", "pop_mean", "pop_min", "env_steps_M")
 """Per-run figures compared across the two sides."""
 STOPPED = "stopped-early"
+EQUAL_COST = ("seed", "E", "robots_with", "robots_without", "best_without", "best_with",
+              "pop_mean_without", "pop_mean_with")
+"""The columns of :func:`analysis.equal_cost.equal_cost_table` the report shows."""
 
 
-def cost_trace(runs: Runs) -> pd.DataFrame:
-    """Per robot of every run, in birth order: the cumulative env steps and the population.
+def side_trace(runs: Runs, side: str) -> pd.DataFrame:
+    """Per robot of every run of one side, in birth order: its cost trace.
 
     Returns:
-        :func:`analysis.population.population_trace` (``pop_max`` is the best fully
-        trained fitness so far) with ``seed``, ``status`` and ``env_steps`` (cumulative
-        env steps up to and including the robot) added.
+        :func:`analysis.population.population_trace` (``best`` is ``pop_max``, the best
+        fully trained fitness so far) with ``arm`` (``side``), ``seed``, ``status`` and
+        ``env_steps`` (cumulative env steps up to and including the robot) added; ``run``
+        is ``<side>/<run>``, as the two sides' run directories may share a name.
     """
     robots = runs.robots.sort_values(["run", "birth"])
     traces = [population_trace(rows, runs.population_sizes[str(run)])
@@ -66,8 +71,9 @@ def cost_trace(runs: Runs) -> pd.DataFrame:
     trace = pd.concat(traces, ignore_index=True)
     merged = trace.merge(robots[["run", "birth", "seed", "status", "budget"]],
                          on=["run", "birth"], validate="one_to_one")
-    merged["env_steps"] = merged.groupby("run")["budget"].cumsum()
-    return merged.drop(columns="budget")
+    merged["run"] = side + "/" + merged["run"].astype(str)
+    merged.insert(1, "arm", side)
+    return cost_trace(merged, steps="budget", best="pop_max").drop(columns="budget")
 
 
 def run_table(runs: Runs, side: str, trace: pd.DataFrame) -> pd.DataFrame:
@@ -76,7 +82,7 @@ def run_table(runs: Runs, side: str, trace: pd.DataFrame) -> pd.DataFrame:
     Args:
         runs: The runs of one side.
         side: ``"without"`` or ``"with"``.
-        trace: :func:`cost_trace` of ``runs`` (its last row per run is the final
+        trace: :func:`side_trace` of ``runs`` (its last row per run is the final
             population).
     """
     robots = runs.robots
@@ -84,42 +90,16 @@ def run_table(runs: Runs, side: str, trace: pd.DataFrame) -> pd.DataFrame:
     saved = (robots["scheduled_budget"] - robots["budget"]).clip(lower=0).where(stopped, 0)
     rows = []
     for run in runs.runs.itertuples(index=False):
-        last = trace[trace["run"] == run.run].iloc[-1]
+        last = trace[trace["run"] == f"{side}/{run.run}"].iloc[-1]
         mine = robots["run"] == run.run
         rows.append(dict(
             side=side, seed=int(run.seed), run=run.run, status=run.status,
             robots=int(mine.sum()), stopped_early=int((stopped & mine).sum()),
             env_steps=int(last["env_steps"]), env_steps_M=last["env_steps"] / 1e6,
             saved=int(saved[mine].sum()),
-            best=float(last["pop_max"]), pop_mean=float(last["pop_mean"]),
+            best=float(last["best"]), pop_mean=float(last["pop_mean"]),
             pop_min=float(last["pop_min"]),
         ))
-    return pd.DataFrame(rows)
-
-
-def at_env_steps(trace: pd.DataFrame, run: str, env_steps: float) -> tuple[pd.Series, int]:
-    """A run's population after the last robot that ended within ``env_steps`` (its
-    first robot if none did), and how many robots it had evaluated by then."""
-    rows = trace[trace["run"] == run]
-    within = rows[rows["env_steps"] <= env_steps]
-    return (within.iloc[-1], len(within)) if len(within) else (rows.iloc[0], 1)
-
-
-def equal_cost_table(trace: pd.DataFrame, per_run: pd.DataFrame) -> pd.DataFrame:
-    """Per seed of both sides: the run without the rule (``trace``, its
-    :func:`cost_trace`) when it had spent what the run with the rule spent in all,
-    beside that run at its end."""
-    rows = []
-    for mine in per_run[per_run["side"] == "with"].itertuples(index=False):
-        match = per_run[(per_run["side"] == "without") & (per_run["seed"] == mine.seed)]
-        if match.empty:
-            continue
-        there, evaluated = at_env_steps(trace, match.iloc[0]["run"], mine.env_steps)
-        rows.append(dict(seed=mine.seed, env_steps=mine.env_steps,
-                         robots_with=mine.robots, robots_without=evaluated,
-                         best_without=float(there["pop_max"]), best_with=mine.best,
-                         pop_mean_without=float(there["pop_mean"]),
-                         pop_mean_with=mine.pop_mean))
     return pd.DataFrame(rows)
 
 
@@ -147,38 +127,28 @@ def parting_table(without: Runs, with_: Runs) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _mean_ci(x: NDArray[np.float64]) -> tuple[float, float, float]:
-    """Mean and t-based 95 % CI (NaN interval below two values)."""
-    if len(x) < 2 or np.ptp(x) == 0:
-        mean = float(np.mean(x)) if len(x) else np.nan
-        return mean, np.nan, np.nan
-    ci = scipy.stats.ttest_1samp(x, 0.0).confidence_interval(0.95)
-    return float(np.mean(x)), float(ci.low), float(ci.high)
-
-
-def _paired(with_: NDArray[np.float64], without: NDArray[np.float64]
-            ) -> tuple[float, float, float, float]:
-    """Mean of the paired differences with its t CI, and the paired t-test's p."""
-    mean, low, high = _mean_ci(with_ - without)
-    if np.isnan(low):
-        return mean, low, high, np.nan
-    return mean, low, high, float(scipy.stats.ttest_rel(with_, without).pvalue)
+def _cell(interval: Contrast) -> str:
+    """``mean [CI]``; the mean alone where the values do not vary or are too few."""
+    if interval.se > 0:
+        return fmt_ci(interval.estimate, interval.ci_low, interval.ci_high)
+    return fmt_number(interval.estimate)
 
 
 def comparison_table(per_run: pd.DataFrame, figures: Sequence[str] = FIGURES) -> pd.DataFrame:
-    """Per figure: each side's mean [CI] across seeds and the paired difference."""
+    """Per figure: each side's mean [t CI] across seeds and the paired difference with
+    the paired t-test's p (:func:`analysis.stats.mean_interval`)."""
     paired = per_run.pivot(index="seed", columns="side", values=list(figures)).dropna()
     rows = []
     for figure in figures:
         cells: dict[str, object] = {"figure": figure}
         for side in SIDES:
-            cells[side] = fmt_ci(*_mean_ci(
+            cells[side] = _cell(mean_interval(
                 per_run.loc[per_run["side"] == side, figure].to_numpy(float)))
         if figure in paired and set(SIDES) <= set(paired[figure].columns):
-            mean, low, high, p = _paired(paired[figure]["with"].to_numpy(float),
-                                         paired[figure]["without"].to_numpy(float))
-            cells["with - without"] = fmt_ci(mean, low, high)
-            cells["paired t p"] = p
+            difference = mean_interval(paired[figure]["with"].to_numpy(float)
+                                       - paired[figure]["without"].to_numpy(float))
+            cells["with - without"] = _cell(difference)
+            cells["paired t p"] = difference.p
             cells["seeds"] = len(paired)
         rows.append(cells)
     return pd.DataFrame(rows)
@@ -199,89 +169,119 @@ def population_test(without: Runs, with_: Runs) -> dict[str, float]:
                         for run, rows in without.robots.groupby("run")])
     test = scipy.stats.mannwhitneyu(x, y, alternative="two-sided")
     return dict(n_with=len(x), n_without=len(y), u=float(test.statistic),
-                p=float(test.pvalue), a12=stats.vargha_delaney_a12(x, y))
+                p=float(test.pvalue), a12=vargha_delaney_a12(x, y))
 
 
-def plot_equal_cost(traces: dict[str, pd.DataFrame], *, path: str | Path | None = None
-                    ) -> Figure:
-    """Best fitness so far and population mean against env steps, one line per run."""
-    fig, axes = plots.new_figure(2, sharey=False)
-    for side, trace in traces.items():
-        for i, (_, rows) in enumerate(trace.groupby("run")):
-            label = f"{side} early rejection" if i == 0 else None
-            for ax, column in zip(axes, ("pop_max", "pop_mean"), strict=True):
-                ax.step(rows["env_steps"], rows[column], where="post",
-                        color=SIDE_COLORS[side], label=label)
-    axes[0].set(xlabel="env steps (cumulative)", ylabel="best fitness so far")
-    axes[1].set(xlabel="env steps (cumulative)", ylabel="population mean fitness")
-    axes[0].legend(loc="lower right")
-    return plots.finish(fig, path)
+@dataclass(frozen=True)
+class Comparison:
+    """The comparison sections over complete runs (see :class:`EarlyRejectionTables`)."""
+
+    across_seeds: pd.DataFrame
+    equal_cost: pd.DataFrame
+    parting: pd.DataFrame
+    population: dict[str, float]
+    env_steps: dict[str, float]
+    """Per side, the mean env steps of its complete runs."""
+
+
+@dataclass(frozen=True)
+class EarlyRejectionTables:
+    """Every table of the report.
+
+    Attributes:
+        sides: The runs of each side, as loaded.
+        trace: :func:`side_trace` of both sides, the run without the rule first.
+        runs: One row per run (:func:`run_table`), by seed and side.
+        comparison: Over complete runs: :func:`comparison_table`, the two sides at
+            equal cost (:func:`analysis.equal_cost.equal_cost_table`), where the paired
+            runs part (:func:`parting_table`) and the final populations pooled
+            (:func:`population_test`); None without a complete run on both sides.
+    """
+
+    sides: dict[str, Runs]
+    trace: pd.DataFrame
+    runs: pd.DataFrame
+    comparison: Comparison | None
+
+
+def early_rejection_tables(sides: dict[str, Runs]) -> EarlyRejectionTables:
+    """The report's tables from the runs of both sides (``"without"``, ``"with"``)."""
+    trace = pd.concat([side_trace(runs, side) for side, runs in sides.items()],
+                      ignore_index=True)
+    per_run = pd.concat([run_table(runs, side, trace[trace["arm"] == side])
+                         for side, runs in sides.items()],
+                        ignore_index=True).sort_values(["seed", "side"], ignore_index=True)
+    done = per_run[per_run["status"] == "complete"]
+    if any(done["side"].eq(side).sum() == 0 for side in SIDES):
+        return EarlyRejectionTables(sides, trace, per_run, None)
+    complete = {side: complete_runs(runs) for side, runs in sides.items()}
+    kept = trace["run"].isin(done["side"] + "/" + done["run"].astype(str))
+    with_ = done[done["side"] == "with"].drop_duplicates("seed")  # as equal_cost_table
+    table = equal_cost_table(trace[kept], dict(zip(with_["seed"], with_["env_steps"],
+                                                   strict=True)))
+    comparison = Comparison(
+        comparison_table(done), table[list(EQUAL_COST)].rename(columns={"E": "env_steps"}),
+        parting_table(complete["without"], complete["with"]),
+        population_test(complete["without"], complete["with"]),
+        {side: done.loc[done["side"] == side, "env_steps"].mean() for side in SIDES})
+    return EarlyRejectionTables(sides, trace, per_run, comparison)
 
 
 def write_equal_cost(without_paths: Sequence[Path], with_paths: Sequence[Path],
                      out: str | Path) -> Path:
     """Load both sides, write ``out/equal_cost.md`` with its figure and CSV, return it."""
     out = report_folder(out)
-    sides = {"without": load_runs(without_paths), "with": load_runs(with_paths)}
-    traces = {side: cost_trace(runs) for side, runs in sides.items()}
-    per_run = pd.concat([run_table(runs, side, traces[side]) for side, runs in sides.items()],
-                        ignore_index=True).sort_values(["seed", "side"], ignore_index=True)
-    per_run.to_csv(out / "equal_cost_runs.csv", index=False)
+    tables = early_rejection_tables({"without": load_runs(without_paths),
+                                     "with": load_runs(with_paths)})
+    tables.runs.to_csv(out / "equal_cost_runs.csv", index=False)
     figure = out / "equal_cost.png"
-    plot_equal_cost(traces, path=figure)
+    plot_equal_cost(tables.trace, legend="{} early rejection", path=figure)
     report = out / REPORT
-    report.write_text(_markdown(sides, traces["without"], per_run, figure, out),
-                      encoding="utf-8")
+    report.write_text(_markdown(tables, figure, out), encoding="utf-8")
     return report
 
 
-def _markdown(sides: dict[str, Runs], trace_without: pd.DataFrame, per_run: pd.DataFrame,
-              figure: Path, out: Path) -> str:
+def _markdown(tables: EarlyRejectionTables, figure: Path, out: Path) -> str:
     parts = [
         "# Early rejection at equal cost\n",
         "Runs without the rule against runs with it (`analysis.equal_cost`). Fitness is a "
         "fully trained robot's: an offspring stopped early never enters the population. "
         "`saved` is the env steps the stopped offspring's schedule had left. Only "
         "complete runs enter the comparisons.\n",
-        "## Runs\n", markdown_table(per_run),
-        *_comparison_markdown({side: complete_runs(runs) for side, runs in sides.items()},
-                              trace_without, per_run[per_run["status"] == "complete"]),
+        "## Runs\n", markdown_table(tables.runs),
+        *(_comparison_markdown(tables.comparison) if tables.comparison is not None else
+          ["_No complete run on both sides yet: no comparison._\n"]),
         figure_link(figure, out, "best fitness so far and population mean against env steps"),
     ]
-    notes = [n for runs in sides.values() for n in runs.notes]
+    notes = [n for runs in tables.sides.values() for n in runs.notes]
     if notes:
         parts += ["## Notes on the input\n", *(f"- {n}\n" for n in notes)]
     return "\n".join(parts)
 
 
-def _comparison_markdown(sides: dict[str, Runs], trace_without: pd.DataFrame,
-                         done: pd.DataFrame) -> list[str]:
-    """The comparison sections over complete runs, or why there are none yet."""
-    if any(done["side"].eq(side).sum() == 0 for side in SIDES):
-        return ["_No complete run on both sides yet: no comparison._\n"]
-    test = population_test(sides["without"], sides["with"])
-    without_steps = done.loc[done["side"] == "without", "env_steps"].mean()
-    with_steps = done.loc[done["side"] == "with", "env_steps"].mean()
+def _comparison_markdown(c: Comparison) -> list[str]:
+    """The comparison sections over complete runs."""
+    test, without_steps, with_steps = c.population, c.env_steps["without"], c.env_steps["with"]
     return [
         "## Across seeds (mean [t 95 % CI]; difference paired by seed)\n",
-        markdown_table(comparison_table(done)),
+        markdown_table(c.across_seeds),
         f"Whole schedule (mean over complete runs): {without_steps:,.0f} env steps without "
         f"the rule, {with_steps:,.0f} with it ({without_steps / with_steps:.2f}x fewer).\n",
         "## At equal cost\n",
         "The run without the rule when it had spent what the run with it spent in all "
         "(and the robots it had evaluated by then), beside the run with the rule at its "
         "end.\n",
-        markdown_table(equal_cost_table(trace_without, done)),
+        markdown_table(c.equal_cost),
         "## Where the paired runs part\n",
         "`same_first_births`: births at which both runs evaluated the same robot before "
         "they first differ; `first_stop`: the first birth the rule stopped. Where the runs "
         "part before the first stop (asynchronous evaluation with several workers), the "
         "per-seed difference is GA-run variance as much as the rule's doing; with "
         "`executor=serial` they part only at the first stop.\n",
-        markdown_table(parting_table(sides["without"], sides["with"])),
+        markdown_table(c.parting),
         "## Final populations pooled\n",
         f"Mann–Whitney U = {test['u']:.1f}, p = {test['p']:.3g}, A12 (with over without) "
-        f"= {test['a12']:.2f} ({stats.a12_magnitude(test['a12'])}), "
+        f"= {test['a12']:.2f} ({a12_magnitude(test['a12'])}), "
         f"{test['n_with']} and {test['n_without']} members. The members of one population "
         "are not independent draws, so this test overstates its power; the paired "
         "per-seed test above is the conservative one.\n",
