@@ -27,6 +27,7 @@ from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
 from evo.robot import GeneratorParams, Limits
 from evo.robot.builder import PhysicsParams
+from evo.schemas import register_schemas
 
 if TYPE_CHECKING:
     from evo.retrain import RetrainConfig, Retraining
@@ -45,6 +46,7 @@ def compose_config(overrides: Sequence[str]) -> DictConfig:
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
 
+    register_schemas()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             return compose("config", overrides=list(overrides))

@@ -87,7 +87,10 @@ from evo.run.files import (
 from evo.run.layout import RetrainLayout, RunLayout
 from evo.run.records import HistoryRow, read_retrain_settings
 from evo.run.store import RunStore, SavedState
+from evo.schemas import register_schemas
 from evo.sweep import trial_overrides
+
+register_schemas()  # the defaults conf/ starts from, before Hydra composes (evo.schemas)
 
 
 def _robot(cfg: DictConfig) -> Robot:

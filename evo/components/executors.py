@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 T = TypeVar("T")
@@ -84,13 +84,11 @@ class SerialExecutor(Executor):
     """
 
     threads: int = 1
-    workers: int = 1
+    workers: int = field(default=1, init=False)  # one at a time; no config key
 
     def __post_init__(self) -> None:
-        if self.threads < 1 or self.workers != 1:
-            raise ValueError(
-                f"need threads >= 1 and workers == 1, got {self.threads}, {self.workers}"
-            )
+        if self.threads < 1:
+            raise ValueError(f"threads must be >= 1, got {self.threads}")
         set_threads(self.threads)
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
