@@ -79,6 +79,9 @@ class EvalExecutor(Protocol):
 class SerialExecutor(Executor):
     """Runs every evaluation in this process when it is submitted.
 
+    No retries: an evaluation that kills its process ends the run (``resume=``
+    continues it).
+
     Attributes:
         threads: Compute threads of this process.
     """
@@ -238,8 +241,11 @@ class LocalExecutor:
 
     Attributes:
         workers: Worker processes (0 = one per core).
-        threads: Compute threads per worker.
-        retries: Resubmissions of an evaluation whose worker died (module docstring).
+        threads: Compute threads per worker (workers x threads should not exceed the
+            cores).
+        retries: Resubmissions, with the same seed, of an evaluation whose worker
+            process died (e.g. OOM-killed); after them, a ``failed`` row (module
+            docstring).
     """
 
     workers: int = 0
@@ -348,8 +354,10 @@ class RayExecutor:
     Attributes:
         workers: Evaluations in flight at once (0 = the cluster's CPUs / threads).
         threads: CPUs (and compute threads) per evaluation.
-        address: Ray cluster address, or None for a local instance.
-        retries: Resubmissions of an evaluation whose Ray worker or node was lost.
+        address: Ray cluster address (e.g. ``"auto"``), or None to start a local
+            instance.
+        retries: Resubmissions, with the same seed, of an evaluation whose Ray worker or
+            node was lost; after them, a ``failed`` row.
     """
 
     workers: int = 0

@@ -288,15 +288,18 @@ class GAConfig:
         structure: Which structure strategy makes the robots.
         selection: How parents are chosen (``E``).
         replacement: Steady-state replacement.
-        schedule: Training budget of every evaluation.
+        schedule: Training budget of every evaluation, env steps.
         crossover_tries: Swaps tried per parent pair before a new pair is drawn (``E``).
         parent_tries: Parent pairs tried before breeding gives up (``E``).
         mutation_rate: Probability an offspring is also mutated (``E``; 0 in the paper).
         mutation_operators: The mutation operators an offspring may get, one drawn
             at random (``E``).
-        eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
+        eval_timeout_s: Wall-clock limit of one evaluation, seconds, checked after
+            every collector batch (0 = none).
         inheritance: Whether an offspring's policy starts from a parent's, a key of
-            :data:`evo.components.inheritance.INHERITANCE_MODES` (``off``: from scratch).
+            :data:`evo.components.inheritance.INHERITANCE_MODES` (``off``: from scratch,
+            as in the paper; ``parent``: its parent's with the most motors and pivots).
+            Quote ``"off"`` in YAML, which reads a bare off as false.
         early_rejection: When an offspring's training may stop early.
     """
 
