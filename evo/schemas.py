@@ -18,8 +18,8 @@ nested node, with ``_target_`` first at the top where the option chooses a class
 learner, the executors) and in every swappable part (:data:`evo.config.SWAPPABLE`:
 ``ga.selection``, ``ga.mutation_operators``, ...). A field the constructor does not take
 (``init=False``) is no config key. The nodes are plain mappings, not structured
-configs: the composed config is what the YAML files alone composed before, and
-:func:`evo.config.typed` still checks every value.
+configs: Hydra checks no types, and :func:`evo.config.typed` checks every value as it
+checks one a YAML file sets, naming its key.
 
 ``python evo/main.py`` and :func:`evo.edge.compose_config` register before they compose,
 and so must anything else that composes ``conf/`` (the tests do, in ``conftest.py``).
