@@ -20,7 +20,6 @@ import copy
 import dataclasses
 import typing
 from collections.abc import Mapping
-from types import MappingProxyType
 from typing import Any, TypeVar
 
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
@@ -30,18 +29,6 @@ T = TypeVar("T")
 
 class ConfigError(ValueError):
     """A config value is missing, unknown or out of range; the message names the key."""
-
-
-SWAPPABLE: Mapping[str, object] = MappingProxyType({"swappable": True})
-"""The ``metadata`` of a dataclass field that is a swappable part
-(``field(default_factory=Roulette, metadata=SWAPPABLE)``): its config node names its
-class with ``_target_`` (each item's, for a tuple), so a config may name a subclass. The
-defaults :mod:`evo.schemas` registers carry that ``_target_``."""
-
-
-def swappable(field: dataclasses.Field[Any]) -> bool:
-    """Whether a dataclass field is a swappable part (:data:`SWAPPABLE`)."""
-    return bool(field.metadata.get("swappable", False))
 
 
 def _coerce(value: Any, hint: Any, key: str) -> Any:
@@ -280,3 +267,15 @@ def _mutation(op: Any, key: str) -> Any:
                           f"{', '.join(MUTATIONS)}")
     cls = type(MUTATIONS[op])
     return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}
+
+
+SWAPPABLE: Mapping[str, object] = {"swappable": True}
+"""The ``metadata`` of a dataclass field that is a swappable part
+(``field(default_factory=Roulette, metadata=SWAPPABLE)``): its config node names its
+class with ``_target_`` (each item's, for a tuple), so a config may name a subclass. The
+defaults :mod:`evo.schemas` registers carry that ``_target_``."""
+
+
+def swappable(field: dataclasses.Field[Any]) -> bool:
+    """Whether a dataclass field is a swappable part (:data:`SWAPPABLE`)."""
+    return bool(field.metadata.get("swappable", False))

@@ -27,7 +27,6 @@ from evo.learners.common import LearnerConfig
 from evo.record import RecordConfig
 from evo.robot import GeneratorParams, Limits
 from evo.robot.builder import PhysicsParams
-from evo.schemas import register_schemas
 
 if TYPE_CHECKING:
     from evo.retrain import RetrainConfig, Retraining
@@ -45,6 +44,8 @@ def compose_config(overrides: Sequence[str]) -> DictConfig:
     """
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
+
+    from evo.schemas import register_schemas
 
     register_schemas()
     try:
