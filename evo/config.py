@@ -294,3 +294,15 @@ def _mutation(op: Any, key: str) -> Any:
                           f"{', '.join(MUTATIONS)}")
     cls = type(MUTATIONS[op])
     return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}
+
+
+SWAPPABLE: Mapping[str, object] = {"swappable": True}
+"""The ``metadata`` of a dataclass field that is a swappable part
+(``field(default_factory=Roulette, metadata=SWAPPABLE)``): its config node names its
+class with ``_target_`` (each item's, for a tuple), so a config may name a subclass. The
+defaults :mod:`evo.schemas` registers carry that ``_target_``."""
+
+
+def swappable(field: dataclasses.Field[Any]) -> bool:
+    """Whether a dataclass field is a swappable part (:data:`SWAPPABLE`)."""
+    return bool(field.metadata.get("swappable", False))

@@ -183,7 +183,9 @@ class EarlyRejection:
 
     Attributes:
         enabled: Whether offspring may be stopped early (off in every paper config).
-        checkpoints: Fractions of the offspring's budget at which the rule looks.
+        checkpoints: Fractions of the offspring's budget at which the rule looks
+            (calibrated in docs/results/early_rejection/: earlier cuts stop offspring
+            that would have entered the population).
         predictor: How the final fitness is predicted from the curve so far: ``value``,
             ``area`` or ``curve`` (see the module docstring).
         margin: Fitness units: stop when ``prediction + margin`` is below the population

@@ -79,7 +79,10 @@ from evo.run.files import (
 from evo.run.layout import RetrainLayout, RunLayout
 from evo.run.records import Candidate, HistoryRow, read_retrain_settings
 from evo.run.store import RunStore, SavedState
+from evo.schemas import register_schemas
 from evo.sweep import trial_overrides
+
+register_schemas()  # the defaults conf/ starts from, before Hydra composes (evo.schemas)
 
 
 @dataclass(frozen=True)

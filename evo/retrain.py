@@ -86,11 +86,12 @@ class RetrainConfig:
     Attributes:
         robots: A robot file, or a folder of them (every ``*.json``), each under its
             file name.
-        random: How many random robots of distinct structure to draw with the root seed.
+        random: How many random robots of distinct structure to draw with the root seed
+            (at least 3).
         runs: GA run directories, or folders holding them: each run's best robot
             (``summary.json``'s ``best_robot``), under the run's name.
         population: A GA run directory: the robots of its population (``state.json``).
-        seeds: Trainings per structure, each with its own seed.
+        seeds: Trainings per structure, each with its own seed (at least 2).
         first_seed: None: each training's seed is spawned from the root seed, the
             structure and the replicate (:func:`training_seed`); N: a structure's
             trainings use seeds N, N+1, ... as ``+exp=train seed=N`` does.
@@ -100,7 +101,7 @@ class RetrainConfig:
             episodes of the policy's mean action, seed + 1), as ``+exp=train`` does.
         confirm: Once every training is done, train the best evolved and the best
             designed structure (highest mean evaluation return, or fitness without an
-            evaluation) again under this many fresh seeds (0: none).
+            evaluation) again under this many fresh seeds (0: none; else at least 2).
     """
 
     robots: str | None = None

@@ -7,6 +7,11 @@ from pathlib import Path
 import pytest
 from test_evolution import TINY, main_cmd, run
 
+from evo.schemas import register_schemas
+
+# The conf/ files start from these nodes: every test that composes them needs them.
+register_schemas()
+
 
 @pytest.fixture(scope="module")
 def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:

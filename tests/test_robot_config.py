@@ -109,7 +109,7 @@ def test_every_config_composes_and_types(hydra_conf: None, overrides: list[str])
 
 
 def test_config_defaults_match_the_dataclass_defaults(hydra_conf: None) -> None:
-    # The YAML documents every field; its values are the code's defaults.
+    # The composed config lists every field, at the code's defaults (evo.schemas).
     cfg = compose("config")
     key = robot_key(cfg)
     for name, cls in ROBOT_SECTIONS.items():

@@ -41,7 +41,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 T = TypeVar("T")
@@ -79,18 +79,19 @@ class EvalExecutor(Protocol):
 class SerialExecutor(Executor):
     """Runs every evaluation in this process when it is submitted.
 
+    No retries: an evaluation that kills its process ends the run (``resume=``
+    continues it).
+
     Attributes:
         threads: Compute threads of this process.
     """
 
     threads: int = 1
-    workers: int = 1
+    workers: int = field(default=1, init=False)  # one at a time; no config key
 
     def __post_init__(self) -> None:
-        if self.threads < 1 or self.workers != 1:
-            raise ValueError(
-                f"need threads >= 1 and workers == 1, got {self.threads}, {self.workers}"
-            )
+        if self.threads < 1:
+            raise ValueError(f"threads must be >= 1, got {self.threads}")
         set_threads(self.threads)
 
     def submit(self, fn: Callable[..., T], /, *args: Any, **kwargs: Any) -> Future[T]:
@@ -240,8 +241,11 @@ class LocalExecutor:
 
     Attributes:
         workers: Worker processes (0 = one per core).
-        threads: Compute threads per worker.
-        retries: Resubmissions of an evaluation whose worker died (module docstring).
+        threads: Compute threads per worker (workers x threads should not exceed the
+            cores).
+        retries: Resubmissions, with the same seed, of an evaluation whose worker
+            process died (e.g. OOM-killed); after them, a ``failed`` row (module
+            docstring).
     """
 
     workers: int = 0
@@ -350,8 +354,10 @@ class RayExecutor:
     Attributes:
         workers: Evaluations in flight at once (0 = the cluster's CPUs / threads).
         threads: CPUs (and compute threads) per evaluation.
-        address: Ray cluster address, or None for a local instance.
-        retries: Resubmissions of an evaluation whose Ray worker or node was lost.
+        address: Ray cluster address (e.g. ``"auto"``), or None to start a local
+            instance.
+        retries: Resubmissions, with the same seed, of an evaluation whose Ray worker or
+            node was lost; after them, a ``failed`` row.
     """
 
     workers: int = 0

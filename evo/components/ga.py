@@ -29,6 +29,7 @@ import numpy.typing as npt
 
 from evo.checks import at_least, positive, within
 from evo.components.inheritance import INHERITANCE_MODES
+from evo.config import SWAPPABLE
 from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,
@@ -278,31 +279,35 @@ class GAConfig:
         structure: Which structure strategy makes the robots.
         selection: How parents are chosen (``E``).
         replacement: Steady-state replacement.
-        schedule: Training budget of every evaluation.
+        schedule: Training budget of every evaluation, env steps.
         crossover_tries: Swaps tried per parent pair before a new pair is drawn (``E``).
         parent_tries: Parent pairs tried before breeding gives up (``E``).
         mutation_rate: Probability an offspring is also mutated (``E``; 0 in the paper).
         mutation_operators: The mutation operators an offspring may get, one drawn
             at random (``E``).
-        eval_timeout_s: Wall-clock limit of one evaluation, seconds (0 = none).
-        early_rejection: When an offspring's training may stop early.
+        eval_timeout_s: Wall-clock limit of one evaluation, seconds, checked after
+            every collector batch (0 = none).
         inheritance: Whether an offspring's policy starts from a parent's, a key of
-            :data:`evo.components.inheritance.INHERITANCE_MODES` (``off``: from scratch).
+            :data:`evo.components.inheritance.INHERITANCE_MODES` (``off``: from scratch,
+            as in the paper; ``parent``: its parent's with the most motors and pivots).
+            Quote ``"off"`` in YAML, which reads a bare off as false.
+        early_rejection: When an offspring's training may stop early.
     """
 
     population_size: int = 20
     robot_budget: int = 100
-    structure: StructureChoice = field(default_factory=EvolveChoice)
-    selection: Roulette = field(default_factory=Roulette)
-    replacement: ReplaceWorst = field(default_factory=ReplaceWorst)
-    schedule: BudgetSchedule = field(default_factory=BudgetSchedule)
+    structure: StructureChoice = field(default_factory=EvolveChoice, metadata=SWAPPABLE)
+    selection: Roulette = field(default_factory=Roulette, metadata=SWAPPABLE)
+    replacement: ReplaceWorst = field(default_factory=ReplaceWorst, metadata=SWAPPABLE)
+    schedule: BudgetSchedule = field(default_factory=BudgetSchedule, metadata=SWAPPABLE)
     crossover_tries: int = 100
     parent_tries: int = 20
     mutation_rate: float = 0.0
-    mutation_operators: tuple[Mutation, ...] = tuple(MUTATIONS.values())
-    eval_timeout_s: float = 0.0
-    early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
+    mutation_operators: tuple[Mutation, ...] = field(
+        default=tuple(MUTATIONS.values()), metadata=SWAPPABLE)
+    eval_timeout_s: float = 0  # 0, as run directories' config.yaml have always said
     inheritance: str = "off"
+    early_rejection: EarlyRejection = field(default_factory=EarlyRejection)
 
     def __post_init__(self) -> None:
         at_least(self, 2, "population_size")

@@ -67,6 +67,8 @@ DEFAULT_ROCKS = (
     RockType("cylinder", (0.045, 0.025)),
     RockType("ellipsoid", (0.06, 0.04, 0.03)),
 )
+"""The five rock shapes of the cluttered arena: a cube and a slab (half extents), a
+ball (radius), an upright disc (radius and half height) and a pebble (semi-axes), m."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,10 +80,12 @@ class ArenaParams:
         wall_height: Height of the walls, m.
         wall_thickness: Thickness of the walls, m.
         n_rocks: Rocks per episode (0 = clean arena).
-        rock_types: The rock shapes; rock i has type i mod len(rock_types).
+        rock_types: The rock shapes (:data:`DEFAULT_ROCKS`); rock i has type i mod
+            len(rock_types).
         rock_density: Density of the rocks, kg/m^3 (light enough to be pushed).
         rock_spread: Rocks are scattered within this distance of the target, m.
-        start_clearance: No rock centre closer than this to the arena centre, m.
+        start_clearance: No rock centre closer than this to the arena centre (the
+            robot's start), m.
         target_clearance: No rock centre closer than this to the target, m.
         sleep: Let bodies at rest sleep (MuJoCo's sleeping islands): a rock that has
             settled leaves the simulation, and its contacts with the floor, until

@@ -108,8 +108,9 @@ class EnvConfig:
     """One ``conf/env/*.yaml``: which arena, the task, and how many threads step it.
 
     Attributes:
-        name: Label of the arena (clean, cluttered).
-        nthread: Threads MuJoCo uses to step one evaluation's arenas.
+        name: Label of the arena (clean, cluttered), used in run names and reports.
+        nthread: Threads MuJoCo uses to step one evaluation's arenas (1: one per
+            worker of the executor).
         arena: The arena.
         task: The task.
     """

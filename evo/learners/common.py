@@ -39,14 +39,16 @@ class LearnerConfig:
 
     Attributes:
         update: Whether the policy is trained (False for the random learner).
-        total_steps: Training budget in env steps when run alone (the GA sets its own).
+        total_steps: Training budget in env steps when run alone (``task=train``; the GA
+            sets its own).
         num_envs: Arenas stepped together in one process.
-        rollout_steps: Control steps per arena per collector batch.
+        rollout_steps: Control steps per arena per collector batch (a batch is
+            ``num_envs x rollout_steps`` env steps).
         epochs: Passes over each batch.
         minibatch_size: Samples per gradient step.
         lr: Adam learning rate, decayed linearly to 0 over the budget if ``anneal_lr``.
         anneal_lr: Decay the learning rate linearly over the budget.
-        gamma: Discount factor.
+        gamma: Discount factor per control step (0.05 s).
         lmbda: GAE lambda.
         clip_epsilon: PPO ratio clip.
         entropy_coeff: Weight of the entropy bonus.
@@ -61,7 +63,8 @@ class LearnerConfig:
         reward_scaling: Divide the rewards the update sees by the running standard
             deviation of the discounted return (Engstrom et al. 2020); the curve and
             the fitness keep the env's rewards.
-        eval_episodes: Episodes of the deterministic evaluation after training.
+        eval_episodes: Episodes of the deterministic evaluation after training
+            (``task=train``, and ``retrain.evaluate``).
     """
 
     update: bool = True

@@ -42,13 +42,17 @@ class RecordConfig:
     """One ``conf/record/*.yaml``.
 
     Attributes:
-        mcap: Write MCAP files (``evals/<robot>.mcap``, ``run.mcap``).
-        rerun: Write rerun files (``evals/<robot>.rrd``, ``run.rrd``).
+        mcap: Write MCAP files (``evals/<robot>.mcap``, ``run.mcap``): for Foxglove,
+            and the learning curves analysis reads.
+        rerun: Write rerun files (``evals/<robot>.rrd``, ``run.rrd``): 3D replay and
+            curve plots in the rerun viewer.
         episodes: Which episodes to record.
-        frame_stride: Keep every n-th control step of a recorded episode.
+        frame_stride: Keep every n-th control step of a recorded episode (1 = all, at
+            20 Hz).
         still_tolerance: A body that moves less than this during an episode (m, and
             quaternion units) is stored once for the episode (0 = every frame).
-        flush_every: Flush the files every n learning-curve rows.
+        flush_every: Flush the files every n learning-curve rows (a crash keeps every
+            row up to the last flush).
     """
 
     mcap: bool = True

@@ -64,7 +64,8 @@ class PhysicsParams:
             and small enough that two wheels in diagonal cells never overlap at rest
             (see ``max_wheel_radius``).
         wheel_width: Wheel thickness along its axle, m.
-        friction: Sliding, torsional and rolling friction of every robot geom.
+        friction: Sliding, torsional and rolling friction of every robot geom
+            (MuJoCo's coefficients: sliding unitless, torsional and rolling in m).
         body_damping: Damping on the brain's free joint, N s/m and N m s/rad: air drag
             and rolling resistance lumped together, so a robot rocking on a wheel rim
             comes to rest.
