@@ -141,9 +141,12 @@ def test_a_dead_worker_spends_only_its_own_evaluations_retries(tmp_path: Path) -
     executor = LocalExecutor(workers=2, retries=0)
     try:
         started, release = tmp_path / "started", tmp_path / "release"
-        # The innocent runs until released; the culprit kills its worker once the
-        # innocent has started: the innocent is in flight when the pool breaks.
+        # The innocent runs until released; the culprit, submitted once the innocent
+        # has started (so it runs in the other worker), kills its worker: the innocent
+        # is in flight when the pool breaks.
         innocent = executor.submit(faults.hold, str(started), str(release))
+        while not started.exists() and not innocent.done():
+            time.sleep(0.01)
         culprit = executor.submit(faults.die, str(started))
         with pytest.raises(EvaluationLost, match="killed by SIGKILL"):
             culprit.result(timeout=300)

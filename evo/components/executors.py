@@ -278,6 +278,11 @@ class LocalExecutor:
                     initializer=_init_worker,
                     initargs=(self.threads, os.getpid(), self._started),
                 )
+                # Launch every worker at the first submit, before the pool's manager
+                # thread starts watching them: a worker spawned later (the default for
+                # spawned pools) is not watched, so its death would go unnoticed until
+                # another evaluation returns.
+                self._pool._safe_to_dynamically_spawn_children = False  # type: ignore[attr-defined]
             return self._pool
 
     def submit(self, fn: Callable[..., T], *args: Any) -> Future[T]:
