@@ -63,12 +63,12 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 from omegaconf import DictConfig, OmegaConf
 
 from analysis.evo_task import run_evo
 from analysis.load import find_run_dirs
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table, safe_name
+from analysis.stats import mean_interval, welch_contrast
 from evo.run.layout import RetrainLayout, RunLayout
 from evo.run.records import read_retrain_settings
 
@@ -176,28 +176,23 @@ def _notes(folder: Path, trainings: pd.DataFrame, arena: str) -> list[str]:
 
 
 def mean_ci(values: Sequence[float] | np.ndarray) -> tuple[float, float, float, int]:
-    """The mean of the finite ``values`` with its 95 % t-interval over them.
+    """The mean of the finite ``values`` with its 95 % t-interval over them
+    (:func:`analysis.stats.mean_interval`).
 
     Returns:
         ``(mean, low, high, n)``; the interval is NaN for fewer than 2 values, and the
-        mean itself when they are all equal (scipy gives no interval of zero width).
+        mean itself when they are all equal.
     """
     x = np.asarray(values, dtype=float)
-    x = x[np.isfinite(x)]
-    if len(x) == 0:
-        return math.nan, math.nan, math.nan, 0
-    mean = float(x.mean())
-    if len(x) < 2:
-        return mean, math.nan, math.nan, 1
-    if np.ptp(x) == 0:
-        return mean, mean, mean, len(x)
-    ci = scipy.stats.ttest_1samp(x, 0.0).confidence_interval(CONFIDENCE)
-    return mean, float(ci.low), float(ci.high), len(x)
+    n = int(np.isfinite(x).sum())
+    interval = mean_interval(x, CONFIDENCE)
+    return interval.estimate, interval.ci_low, interval.ci_high, n
 
 
 def welch_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray
                      ) -> tuple[float, float, float]:
-    """``mean(a) − mean(b)`` over the finite values, with Welch's 95 % interval.
+    """``mean(a) − mean(b)`` over the finite values, with Welch's 95 % interval
+    (:func:`analysis.stats.welch_contrast`).
 
     Returns:
         ``(difference, low, high)``; the interval is NaN when a side has fewer than 2
@@ -207,13 +202,8 @@ def welch_difference(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.nd
     x, y = x[np.isfinite(x)], y[np.isfinite(y)]
     if len(x) == 0 or len(y) == 0:
         return math.nan, math.nan, math.nan
-    diff = float(x.mean() - y.mean())
-    if len(x) < 2 or len(y) < 2:
-        return diff, math.nan, math.nan
-    if np.ptp(x) == 0 and np.ptp(y) == 0:
-        return diff, diff, diff
-    ci = scipy.stats.ttest_ind(x, y, equal_var=False).confidence_interval(CONFIDENCE)
-    return diff, float(ci.low), float(ci.high)
+    contrast = welch_contrast([x, y], [1.0, -1.0], CONFIDENCE)
+    return contrast.estimate, contrast.ci_low, contrast.ci_high
 
 
 def metric_ci(metric: str, values: np.ndarray) -> tuple[float, float, float, int]:

@@ -247,12 +247,17 @@ def test_a_bad_retrain_setting_names_its_key(tmp_path: Path) -> None:
     from evo.main import Run, run_retrain
     from evo.run.files import RunLock
 
+    (tmp_path / "empty").mkdir()
     for overrides, message in [
         (["retrain.random=3", "retrain.seeds=1"], "retrain.seeds: expected at least 2, got 1"),
         ([], "retrain.robots: give the structures to train"),
         (["retrain.random=3", "retrain.confirm=1"], "retrain.confirm: expected 0 or at least 2"),
         (["retrain.random=3", "retrain.first_seed=-1"], "retrain.first_seed: expected a non"),
         (["retrain.runs=[nowhere]"], "retrain.runs nowhere: not a GA run directory"),
+        (["retrain.random=2"], "retrain.random: expected at least 3 robots, got 2"),
+        ([f"retrain.robots={tmp_path / 'empty'}"], "no robot files"),
+        ([f"retrain.robots={tmp_path / 'missing'}"], "no such folder"),
+        (["retrain.random=3", "learner.gamma=2"], "learner: gamma must be in"),
     ]:
         cfg = compose_config(["+exp=retrain", *overrides])
         with pytest.raises(ConfigError, match=message):
