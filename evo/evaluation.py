@@ -100,6 +100,8 @@ class Outcome:
     """The early-rejection rule's last prediction of the final fitness."""
     evaluation: PolicyEvaluation | None = None
     """The deterministic evaluation after training (``Job.eval_episodes``), if any."""
+    stochastic: PolicyEvaluation | None = None
+    """The same episodes with the policy's random actions, beside it."""
 
 
 EXPECTED = (EvaluationTimeout,)
@@ -259,9 +261,12 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
         save_policy(result.policy, layout.policy(candidate.name), job.learner,
                     robot=robot.hash)
         predicted = rule.predicted if rule is not None else float("nan")
-        evaluation = (evaluate_policy(robot, result.policy, physics=job.physics, env=job.env,
-                                      episodes=job.eval_episodes, seed=candidate.seed + 1)
-                      if job.eval_episodes else None)
+        evaluation, noisy = ((evaluate_policy(robot, result.policy, physics=job.physics,
+                                              env=job.env, episodes=job.eval_episodes,
+                                              seed=candidate.seed + 1, scene=scene,
+                                              stochastic=stochastic)
+                              for stochastic in (False, True))
+                             if job.eval_episodes else (None, None))
         recorder.close({"fitness": result.fitness, "env_steps": result.env_steps,
                         "episodes": result.episodes, "predicted": predicted,
                         "status": "stopped-early" if result.stopped_early else "complete"})
@@ -269,4 +274,4 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
                    env_steps=result.env_steps, episodes=result.episodes,
                    extra={"unstable": float(result.unstable)},
                    stopped_early=result.stopped_early, predicted=predicted,
-                   evaluation=evaluation)
+                   evaluation=evaluation, stochastic=noisy)

@@ -438,7 +438,7 @@ def _training_row(retraining: Retraining, training: Training, outcome: Outcome) 
     budget = retraining.settings.budget
     curve = read_curve(RetrainLayout(retraining.out).curve(training.name))
     entry = next(e for e in retraining.entries if e.label == training.label)
-    evaluation = outcome.evaluation
+    evaluation, noisy = outcome.evaluation, outcome.stochastic
     time_to_target = None if evaluation is None else evaluation.time_to_target
     return TrainingRow(
         name=training.name, structure=entry.robot.name, role=training.role,
@@ -452,7 +452,9 @@ def _training_row(retraining: Retraining, training: Training, outcome: Outcome) 
         eval_mean_return=math.nan if evaluation is None else evaluation.mean_return,
         eval_time_to_target=math.nan if time_to_target is None else time_to_target,
         eval_episodes=0 if evaluation is None else len(evaluation.returns),
-        confirmation=training.confirmation)
+        confirmation=training.confirmation,
+        stochastic_success_rate=math.nan if noisy is None else noisy.success_rate,
+        stochastic_mean_return=math.nan if noisy is None else noisy.mean_return)
 
 
 class Retrainer:

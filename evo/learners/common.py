@@ -65,6 +65,20 @@ class LearnerConfig:
             the fitness keep the env's rewards.
         eval_episodes: Episodes of the deterministic evaluation after training
             (``task=train``, and ``retrain.evaluate``).
+        eval_interval: Env steps between the periodic deterministic evaluations during
+            training (the curve's ``eval/`` keys; each after the batch that reaches a
+            multiple of it, and one after the last batch); 0: none. They take env steps
+            of their own, not the budget's, and no random numbers of the training's.
+        eval_interval_episodes: Episodes (one per arena, side by side) of each periodic
+            evaluation, under seed + 2: other targets than the evaluation after training.
+        keep_best: Hand back (and write) the policy of the best periodic evaluation,
+            by success rate and then mean return, instead of the last one (needs
+            ``eval_interval``); the fitness stays the training's (Eq. 8).
+        bound_mean: Squash the Gaussian's mean into the action box [-1, 1] with tanh,
+            so the mean action never lies where the env clips every action.
+        final_log_std: Anneal an upper bound of the log standard deviation linearly
+            from ``init_log_std`` at the first batch to this at the budget's end;
+            None: no bound (the log std is learned freely).
     """
 
     update: bool = True
@@ -87,6 +101,11 @@ class LearnerConfig:
     normalize_obs: bool = True
     reward_scaling: bool = False
     eval_episodes: int = 20
+    eval_interval: int = 0
+    eval_interval_episodes: int = 16
+    keep_best: bool = False
+    bound_mean: bool = False
+    final_log_std: float | None = None
 
     def __post_init__(self) -> None:
         at_least(self, 1, "total_steps", "num_envs", "rollout_steps", "epochs",
@@ -101,8 +120,15 @@ class LearnerConfig:
         for key, ok, expected in ranges:
             if not ok:
                 raise ValueError(f"{key} must be {expected}, got {getattr(self, key)}")
-        at_least(self, 0, "eval_episodes")
+        at_least(self, 0, "eval_episodes", "eval_interval")
+        at_least(self, 1, "eval_interval_episodes")
         within(self, -10, 2, "init_log_std", note=" (a standard deviation of e^-10 to e^2)")
+        if self.final_log_std is not None:
+            within(self, -10, 2, "final_log_std", note=" (a standard deviation of e^-10 to "
+                   "e^2), or null for none")
+        if self.keep_best and not self.eval_interval:
+            raise ValueError("keep_best needs periodic evaluations to choose from: set "
+                             "eval_interval (env steps) > 0")
         if self.minibatch_size > self.frames_per_batch:
             raise ValueError(
                 f"minibatch_size ({self.minibatch_size}) must be <= the batch, num_envs x "
@@ -180,19 +206,27 @@ def _mlp(inputs: int, outputs: int, hidden: tuple[int, ...], out_gain: float) ->
 
 
 class GaussianHead(nn.Module):
-    """Mean from an MLP of the normalised observation, scale from a learned log std."""
+    """Mean from an MLP of the normalised observation (squashed into [-1, 1] by tanh with
+    ``bound_mean``), scale from a learned log std (at most ``log_std_cap``, when set)."""
 
     def __init__(
         self, norm: RunningNorm, obs: int, act: int, hidden: tuple[int, ...], init_log_std: float,
-        out_gain: float = 0.01,
+        out_gain: float = 0.01, bound_mean: bool = False,
     ) -> None:
         super().__init__()
         self.norm, self.mlp = norm, _mlp(obs, act, hidden, out_gain=out_gain)
         self.log_std = nn.Parameter(torch.full((act,), init_log_std))
+        self.bound_mean = bound_mean
+        self.log_std_cap: float | None = None  # set between batches by an annealing learner
 
     def forward(self, observation: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         loc = self.mlp(self.norm(observation))
-        return loc, self.log_std.exp().expand_as(loc)
+        if self.bound_mean:
+            loc = torch.tanh(loc)
+        log_std: torch.Tensor = self.log_std
+        if self.log_std_cap is not None:
+            log_std = log_std.clamp(max=self.log_std_cap)
+        return loc, log_std.exp().expand_as(loc)
 
 
 class GaussianSampler(nn.Module):
@@ -252,6 +286,7 @@ class Checkpoint(TypedDict):
     critic: dict[str, torch.Tensor]
     hidden: NotRequired[list[int]]
     normalize_obs: NotRequired[bool]
+    bound_mean: NotRequired[bool]
     robot: NotRequired[str]  # the hash of the structure it was trained on
 
 
@@ -375,7 +410,7 @@ def make_policy(obs_size: int, action_size: int, config: LearnerConfig) -> Polic
     """Fresh actor and critic for ``obs_size`` observations and ``action_size`` actions."""
     norm = RunningNorm(obs_size, enabled=config.normalize_obs)
     head = GaussianHead(norm, obs_size, action_size, config.hidden, config.init_log_std,
-                        config.policy_out_gain)
+                        config.policy_out_gain, config.bound_mean)
     actor = ProbabilisticActor(
         TensorDictModule(head, in_keys=["observation"], out_keys=["loc", "scale"]),
         in_keys=["loc", "scale"],
@@ -401,6 +436,8 @@ class TrainResult:
         unstable: Episodes ended by a numerical blow-up.
         timing: Seconds spent in physics, the rest of the env, policy and update.
         stopped_early: The curve hook stopped training before the budget was spent.
+        kept_at: With ``keep_best``, the env steps at which the handed-back policy was
+            evaluated best; None when it is the last one.
     """
 
     fitness: float
@@ -412,6 +449,7 @@ class TrainResult:
     unstable: int = 0
     timing: dict[str, float] = field(default_factory=dict)
     stopped_early: bool = False
+    kept_at: int | None = None
 
     @property
     def steps_per_second(self) -> float:
@@ -430,6 +468,8 @@ def save_checkpoint(policy: Policy, path: Path, config: LearnerConfig, *,
     state = policy.state_dict()
     state["hidden"] = list(config.hidden)
     state["normalize_obs"] = config.normalize_obs
+    if config.bound_mean:  # the mean action is tanh of the network's output
+        state["bound_mean"] = True
     state["robot"] = robot
     data = io.BytesIO()  # torch reports a failed write without its cause: written here
     torch.save(state, data)
@@ -467,7 +507,8 @@ def load_checkpoint(path: Path, *, robot: Robot | None = None,
     try:
         state = torch.load(path, weights_only=True)
         config = LearnerConfig(
-            hidden=tuple(state["hidden"]), normalize_obs=bool(state["normalize_obs"])
+            hidden=tuple(state["hidden"]), normalize_obs=bool(state["normalize_obs"]),
+            bound_mean=bool(state.get("bound_mean", False)),
         )
         sizes = int(state["obs_size"]), int(state["action_size"])
         policy = make_policy(*sizes, config)

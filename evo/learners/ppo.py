@@ -17,16 +17,23 @@ Learning-curve row (one per collector batch; every value a float):
 * ``train/reward/<term>``: mean per env step of each reward term in the batch;
 * ``train/loss/objective``, ``train/loss/critic``, ``train/loss/entropy``,
   ``train/entropy``, ``train/kl``, ``train/clip_fraction``, ``train/lr``: means over the
-  batch's minibatch updates (NaN when the learner does not update).
+  batch's minibatch updates (NaN when the learner does not update);
+* ``train/action_std``: the policy's standard deviation in the batch (mean over action
+  dimensions); ``train/mean_outside``: the share of the batch's mean actions outside the
+  action box [-1, 1], where the env clips every action the same;
+* with ``eval_interval``: ``eval/success_rate`` and ``eval/mean_return`` of the periodic
+  deterministic evaluation after the batch's update (NaN in the rows without one).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -38,7 +45,7 @@ from torchrl.objectives.value import GAE
 
 from evo.envs.params import REWARD_TERMS, EnvConfig
 from evo.envs.reach import make_env
-from evo.envs.scene import Scene
+from evo.envs.scene import Scene, compile_scene
 from evo.learners import CurveHook, EpisodeHook, Learner
 from evo.learners.common import (
     Inheritance,
@@ -49,6 +56,7 @@ from evo.learners.common import (
     inherit,
     make_policy,
 )
+from evo.learners.rollouts import evaluate_policy
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -210,11 +218,63 @@ class RewardScale:
 
 def _batch_row(batch: TensorDictBase, steps: int,
                episodes: dict[str, torch.Tensor]) -> dict[str, float]:
-    """The curve row's env-step count, episode statistics and reward terms of a batch."""
+    """The curve row's env-step count, episode statistics, reward terms and the policy's
+    spread and mean actions of a batch."""
     row = {"env_steps": float(steps), **_episode_stats(episodes)}
     for term in REWARD_TERMS:
         row[f"train/reward/{term}"] = float(batch["next", "reward_terms", term].mean())
+    row["train/action_std"] = float(batch["scale"].mean())
+    row["train/mean_outside"] = float((batch["loc"].abs() > 1).float().mean())
     return row
+
+
+class PeriodicEvaluation:
+    """The periodic deterministic evaluations of one training (``eval_interval``), and
+    with ``keep_best`` a copy of the policy that scored best (success, then return).
+
+    Each runs ``eval_interval_episodes`` episodes under ``seed + 2`` in arenas of their
+    own (``evo.learners.rollouts.evaluate_policy``): the same targets every time, and no
+    random numbers of the training's.
+    """
+
+    KEYS = ("eval/success_rate", "eval/mean_return")
+
+    def __init__(self, robot: Robot, physics: PhysicsParams, env: EnvConfig,
+                 config: LearnerConfig, seed: int, scene: Scene) -> None:
+        self.robot, self.physics, self.env, self.scene = robot, physics, env, scene
+        self.config, self.seed = config, seed
+        self.done = 0  # evaluations so far
+        self.best: tuple[float, float] | None = None
+        self.best_state: dict[str, Any] | None = None
+        self.best_steps = 0
+        self.seconds = 0.0
+
+    def __call__(self, policy: Policy, steps: int, last: bool) -> dict[str, float]:
+        """The row's ``eval/`` values: an evaluation's when ``steps`` reached the next
+        multiple of the interval or the batch is the last, NaN otherwise."""
+        if steps // self.config.eval_interval <= self.done and not last:
+            return dict.fromkeys(self.KEYS, float("nan"))
+        tick = time.perf_counter()
+        self.done = max(self.done + 1, steps // self.config.eval_interval)
+        result = evaluate_policy(self.robot, policy, physics=self.physics, env=self.env,
+                                 episodes=self.config.eval_interval_episodes,
+                                 seed=self.seed + 2, scene=self.scene)
+        score = (result.success_rate, result.mean_return)
+        if self.config.keep_best and (self.best is None or score > self.best):
+            self.best, self.best_steps = score, steps
+            self.best_state = copy.deepcopy(
+                {"actor": policy.actor.state_dict(), "critic": policy.critic.state_dict()})
+        self.seconds += time.perf_counter() - tick
+        return dict(zip(self.KEYS, score, strict=True))
+
+    def keep(self, policy: Policy) -> int | None:
+        """Load the best evaluation's weights into ``policy``; the env steps it was
+        evaluated at (None without ``keep_best``)."""
+        if self.best_state is None:
+            return None
+        policy.actor.load_state_dict(self.best_state["actor"])
+        policy.critic.load_state_dict(self.best_state["critic"])
+        return self.best_steps
 
 
 def _train(
@@ -229,6 +289,8 @@ def _train(
     inheritance: Inheritance | None = None, scene: Scene | None = None,
 ) -> TrainResult:
     start = time.perf_counter()
+    if scene is None and config.eval_interval:  # compiled once for both
+        scene = compile_scene(robot, physics, env_config.arena, env_config.task)
     env = make_env(robot, physics, env_config, config.num_envs, seed, scene)
     if on_episode is not None:
         env.core.watch(on_episode)
@@ -238,6 +300,9 @@ def _train(
         inherit(policy, inheritance)
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
+    periodic = (PeriodicEvaluation(robot, physics, env_config, config, seed, scene)
+                if scene is not None and config.eval_interval else None)
+    _anneal(policy, config, 0, budget)
     collector = Collector(
         env, policy.sampler(), frames_per_batch=config.frames_per_batch, total_frames=frames,
         auto_register_policy_transforms=False, track_traj_ids=False,
@@ -260,6 +325,9 @@ def _train(
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
+            _anneal(policy, config, steps, budget)  # the bound of the next batch
+            if periodic is not None:
+                row.update(periodic(policy, steps, last=steps >= frames))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -273,10 +341,26 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
+    kept_at = None
+    if periodic is not None:
+        timing["eval"] = periodic.seconds
+        kept_at = periodic.keep(policy)
+    policy.head.log_std_cap = None  # the trained policy's own spread from here on
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
                        env_steps=steps, episodes=returns_count,
                        wall_seconds=time.perf_counter() - start,
-                       unstable=env.core.unstable_count, timing=timing, stopped_early=stopped)
+                       unstable=env.core.unstable_count, timing=timing, stopped_early=stopped,
+                       kept_at=kept_at)
+
+
+def _anneal(policy: Policy, config: LearnerConfig, steps: int, budget: int) -> None:
+    """With ``final_log_std``, bound the log std of the batches from ``steps`` on: from
+    ``init_log_std`` at 0 linearly to ``final_log_std`` at the budget."""
+    if config.final_log_std is None:
+        return
+    progress = min(1.0, steps / budget)
+    cap = config.init_log_std + (config.final_log_std - config.init_log_std) * progress
+    policy.head.log_std_cap = cap
 
 
 @contextmanager

@@ -114,17 +114,37 @@ def evaluate_policy(
     env: EnvConfig,
     episodes: int,
     seed: int,
+    scene: Scene | None = None,
+    stochastic: bool = False,
 ) -> PolicyEvaluation:
     """Run ``episodes`` deterministic episodes, one per arena, in parallel; each
-    arena's first episode counts (its return, length and whether it reached the target)."""
-    reach = make_env(robot, physics, env, episodes, seed)
+    arena's first episode counts (its return, length and whether it reached the target).
+    ``scene``: the robot's compiled arena, when the caller has it. With ``stochastic``
+    the same episodes with the policy's random actions, as training draws them (noise
+    from ``seed``; torch's global generator is left as it was)."""
+    if stochastic:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            return _evaluate(robot, policy, physics, env, episodes, seed, scene, True)
+    return _evaluate(robot, policy, physics, env, episodes, seed, scene, False)
+
+
+def _evaluate(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConfig,
+              episodes: int, seed: int, scene: Scene | None, stochastic: bool
+              ) -> PolicyEvaluation:
+    reach = make_env(robot, physics, env, episodes, seed, scene)
+    sampler = policy.sampler()
     td = reach.reset()
     finished = torch.zeros(episodes, dtype=torch.bool)
     returns = torch.zeros(episodes)
     lengths = torch.zeros(episodes, dtype=torch.int64)
     success = torch.zeros(episodes, dtype=torch.bool)
     while not finished.all():
-        td["action"] = policy.mean_action(td["observation"])
+        if stochastic:
+            with torch.no_grad():
+                td["action"] = sampler.sample(td["observation"])[2]
+        else:
+            td["action"] = policy.mean_action(td["observation"])
         nxt = reach.step(td)["next"]
         done = nxt["done"].squeeze(-1) & ~finished
         returns[done] = nxt["episode_return"].squeeze(-1)[done]

@@ -98,7 +98,9 @@ def train_robot(robot: Robot, parts: TrainingSetup, *, seed: int, out: Path,
     if summary.success_rate is not None and summary.eval_mean_return is not None:
         console.print(
             f"deterministic evaluation: success {summary.success_rate:.0%}, mean return "
-            f"{summary.eval_mean_return:+.4f} over {learner.eval_episodes} episodes"
+            f"{summary.eval_mean_return:+.4f} over {learner.eval_episodes} episodes "
+            f"(with the policy's noise: success {summary.stochastic_success_rate:.0%}, "
+            f"mean return {summary.stochastic_mean_return:+.4f})"
         )
     console.print(f"files: {out}")
     return summary
@@ -120,20 +122,19 @@ def _train_summary(robot: Robot, result: TrainResult, *, physics: PhysicsParams,
         steps_per_second=result.steps_per_second,
         unstable_episodes=result.unstable,
         timing_seconds=result.timing,
+        kept_at=result.kept_at,
     )
     if learner.eval_episodes:
-        evaluation = evaluate_policy(
-            robot,
-            result.policy,
-            physics=physics,
-            env=env,
-            episodes=learner.eval_episodes,
-            seed=seed + 1,
-        )
+        evaluation, noisy = (evaluate_policy(robot, result.policy, physics=physics, env=env,
+                                             episodes=learner.eval_episodes, seed=seed + 1,
+                                             stochastic=stochastic)
+                             for stochastic in (False, True))
         summary = dataclasses.replace(
             summary, success_rate=evaluation.success_rate,
             eval_mean_return=evaluation.mean_return, eval_episodes=learner.eval_episodes,
-            eval_time_to_target=evaluation.time_to_target)
+            eval_time_to_target=evaluation.time_to_target,
+            stochastic_success_rate=noisy.success_rate,
+            stochastic_mean_return=noisy.mean_return)
     return summary
 
 

@@ -380,6 +380,12 @@ class TrainSummary:
         eval_time_to_target: Its mean simulated seconds to reach the target over the
             episodes that reached it; None when none did (and in summaries written
             before the key existed).
+        stochastic_success_rate: Success rate of the same episodes with the policy's
+            random actions, as training draws them (None without an evaluation, and in
+            summaries written before the key existed).
+        stochastic_mean_return: Their mean return.
+        kept_at: With ``learner.keep_best``, the env steps at which the written policy
+            scored best in the periodic evaluation (absent otherwise).
     """
 
     robot: str
@@ -397,9 +403,13 @@ class TrainSummary:
     eval_mean_return: float | None = None
     eval_episodes: int | None = None
     eval_time_to_target: float | None = None
+    stochastic_success_rate: float | None = None
+    stochastic_mean_return: float | None = None
+    kept_at: int | None = None
 
-    EVALUATION = ("success_rate", "eval_mean_return", "eval_episodes", "eval_time_to_target")
-    """The keys of the deterministic evaluation, written only after one."""
+    EVALUATION = ("success_rate", "eval_mean_return", "eval_episodes", "eval_time_to_target",
+                  "stochastic_success_rate", "stochastic_mean_return")
+    """The keys of the evaluation after training, written only after one."""
 
     def record(self) -> JSONObject:
         """The summary as ``summary.json`` holds it: its fields, the evaluation's only
@@ -408,6 +418,8 @@ class TrainSummary:
         if self.eval_episodes is None:
             for key in self.EVALUATION:
                 data.pop(key)
+        if self.kept_at is None:
+            data.pop("kept_at")
         return data
 
 
@@ -570,6 +582,9 @@ class TrainingRow:
         eval_episodes: Its episodes (0 without one).
         confirmation: Whether it is a confirmation's training (a fresh seed of a
             structure chosen on the others).
+        stochastic_success_rate: The same episodes' success rate with the policy's
+            random actions, as training draws them (NaN without an evaluation).
+        stochastic_mean_return: Their mean return.
     """
 
     name: str
@@ -595,6 +610,8 @@ class TrainingRow:
     eval_time_to_target: float = math.nan
     eval_episodes: int = 0
     confirmation: bool = False
+    stochastic_success_rate: float = math.nan
+    stochastic_mean_return: float = math.nan
 
     def record(self) -> JSONObject:
         """The row as ``trainings.csv`` holds it."""
