@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import torch
 from test_evolution import TINY, main_cmd, run
 
 from evo.schemas import register_schemas
@@ -21,3 +23,13 @@ def serial_reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
     done = run(main_cmd(*TINY, "executor=serial", f"hydra.run.dir={run_dir}"), run_dir.parent)
     assert done.returncode == 0, done.stderr[-3000:]
     return run_dir
+
+
+@pytest.fixture(scope="module")
+def one_thread() -> Iterator[None]:
+    """Results are reproducible for a seed on one thread (float sums depend on threads):
+    a module that trains uses it with ``pytestmark = pytest.mark.usefixtures(...)``."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

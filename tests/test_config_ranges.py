@@ -97,6 +97,8 @@ BAD: dict[str, Any] = {
     "learner.init_log_std": 5.0,
     "learner.policy_out_gain": -1.0,
     "learner.eval_episodes": -1,
+    "learner.eval_interval": -1,
+    "learner.eval_interval_episodes": 0,
     "ga.population_size": 1,
     "ga.robot_budget": 2,
     "ga.selection.epsilon": 0.0,

@@ -41,13 +41,7 @@ def curve_without_time(curve: pd.DataFrame) -> pd.DataFrame:
     return curve.drop(columns=["wall_seconds"])
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():  # noqa: ANN201
-    """Results are reproducible for a seed on one thread (float sums depend on threads)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

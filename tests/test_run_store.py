@@ -116,9 +116,13 @@ def test_each_record_round_trips_through_its_json_form() -> None:
                             learner="ppo", arena="reach", episodes=3, wall_seconds=2.0,
                             steps_per_second=500.0, timing_seconds={"physics": 1.0})
     evaluated = dataclasses.replace(training, success_rate=0.5, eval_mean_return=1.5,
-                                    eval_episodes=4, eval_time_to_target=2.25)
+                                    eval_episodes=4, eval_time_to_target=2.25,
+                                    stochastic_success_rate=0.75, stochastic_mean_return=1.25,
+                                    kept_at=800)
     keys = [f.name for f in dataclasses.fields(TrainSummary)]
-    records += [(training, training.record(), keys[:-4]), (evaluated, evaluated.record(), keys)]
+    unevaluated = [k for k in keys if k not in (*TrainSummary.EVALUATION, "kept_at")]
+    records += [(training, training.record(), unevaluated),
+                (evaluated, evaluated.record(), keys)]
     for record, form, keys in records:
         assert list(form) == keys, f"{type(record).__name__}'s JSON form names {list(form)}"
         back = json.loads(json.dumps(form))
