@@ -267,9 +267,12 @@ class PeriodicEvaluation:
         self.seconds += time.perf_counter() - tick
         return dict(zip(self.KEYS, score, strict=True))
 
-    def keep(self, policy: Policy) -> int | None:
-        """Load the best evaluation's weights into ``policy``; the env steps it was
-        evaluated at (None without ``keep_best``)."""
+    def finish(self, policy: Policy, timing: dict[str, float]) -> int | None:
+        """Load the best evaluation's weights into ``policy`` and move the evaluations'
+        seconds from ``timing``'s update to its ``eval``; the env steps the kept policy
+        was evaluated at (None without ``keep_best``)."""
+        timing["update"] -= self.seconds
+        timing["eval"] = self.seconds
         if self.best_state is None:
             return None
         policy.actor.load_state_dict(self.best_state["actor"])
@@ -326,8 +329,7 @@ def _train(
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
             _anneal(policy, config, steps, budget)  # the bound of the next batch
-            if periodic is not None:
-                row.update(periodic(policy, steps, last=steps >= frames))
+            row.update(periodic(policy, steps, last=steps >= frames) if periodic else {})
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -341,10 +343,7 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
-    kept_at = None
-    if periodic is not None:
-        timing["eval"] = periodic.seconds
-        kept_at = periodic.keep(policy)
+    kept_at = periodic.finish(policy, timing) if periodic else None
     policy.head.log_std_cap = None  # the trained policy's own spread from here on
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
                        env_steps=steps, episodes=returns_count,
