@@ -98,6 +98,9 @@ TRAINING_COLUMNS = ("robot", "origin", "method", "run", "structure", "seed", "ar
 one), ``structure`` the robot's name, ``eval_time_to_target`` simulated seconds (empty
 when no episode reached the target), ``wall_seconds`` the training's wall time; the file
 adds ``confirmation``."""
+NOISY = ("stochastic_success_rate", "stochastic_mean_return")
+"""The noisy policy's evaluation beside the deterministic one, read when the file has it
+(a folder trained before it existed does not)."""
 CONFIDENCE = 0.95
 COMPARISON_FIGURE, CHOSEN_FIGURE = "comparison.png", "chosen.png"
 TRAININGS, COMPARISON, HEAD_TO_HEAD, PER_METHOD, REPORT, SETTINGS = (
@@ -138,7 +141,7 @@ def read_trainings(folder: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
         raise DesignerError(f"{path}: not a comparison's trainings (no {', '.join(missing)})")
     confirmation = (table["confirmation"].astype(bool) if "confirmation" in table
                     else pd.Series(False, index=table.index))
-    columns = list(TRAINING_COLUMNS)
+    columns = [*TRAINING_COLUMNS, *(c for c in NOISY if c in table and table[c].notna().any())]
     return (table.loc[~confirmation, columns].reset_index(drop=True),
             table.loc[confirmation, columns].reset_index(drop=True))
 
@@ -236,6 +239,10 @@ def comparison_table(trainings: pd.DataFrame) -> pd.DataFrame:
             worst = (np.nanmin if better == "higher" else np.nanmax)(values) if n else math.nan
             row |= {f"{metric}_mean": mean, f"{metric}_low": low, f"{metric}_high": high,
                     f"{metric}_worst": float(worst), f"{metric}_seeds": n}
+        if NOISY[0] in group:  # the policy with its noise, on the same episodes
+            noisy = group[NOISY[0]].to_numpy(dtype=float)
+            row |= {f"{NOISY[0]}_mean": float(np.nanmean(noisy)),
+                    f"{NOISY[0]}_worst": float(np.nanmin(noisy))}
         row["fitness_mean"] = float(group["fitness"].mean())
         row["wall_seconds_mean"] = float(group["wall_seconds"].mean())
         rows.append(row)
@@ -506,6 +513,9 @@ def _per_robot_markdown(comparison: pd.DataFrame) -> pd.DataFrame:
         shown[title] = [fmt_ci(r[f"{metric}_mean"], r[f"{metric}_low"], r[f"{metric}_high"])
                         for _, r in comparison.iterrows()]
         shown[f"worst {title}"] = comparison[f"{metric}_worst"]
+        if metric == "success_rate" and f"{NOISY[0]}_mean" in comparison:
+            shown["success with noise"] = comparison[f"{NOISY[0]}_mean"]
+            shown["worst success with noise"] = comparison[f"{NOISY[0]}_worst"]
     shown["seeds reaching"] = comparison["eval_time_to_target_seeds"]
     return shown
 

@@ -102,6 +102,9 @@ class Outcome:
     """The deterministic evaluation after training (``Job.eval_episodes``), if any."""
     stochastic: PolicyEvaluation | None = None
     """The same episodes with the policy's random actions, beside it."""
+    periodic: tuple[float, float] | None = None
+    """The handed-back policy's periodic evaluation during training (success rate, mean
+    return; ``learner.eval_interval``), if any."""
 
 
 EXPECTED = (EvaluationTimeout,)
@@ -274,4 +277,4 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
                    env_steps=result.env_steps, episodes=result.episodes,
                    extra={"unstable": float(result.unstable)},
                    stopped_early=result.stopped_early, predicted=predicted,
-                   evaluation=evaluation, stochastic=noisy)
+                   evaluation=evaluation, stochastic=noisy, periodic=result.evaluation)

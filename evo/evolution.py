@@ -205,6 +205,8 @@ class Evolution:
             predicted=outcome.predicted,
             threshold=candidate.threshold,
             inherited_from=candidate.inherit,
+            **({} if outcome.periodic is None else dict(
+                eval_success_rate=outcome.periodic[0], eval_mean_return=outcome.periodic[1])),
         )
         self.history.append(row)
         self.pending = [t for t in self.pending if t.birth != candidate.birth]

@@ -64,12 +64,12 @@ def test_history_reads_back_what_it_wrote_and_old_files_without_threshold(
                 inherited_from="robot-1")]
     path = write_history(tmp_path / "history.csv", rows)
     table = read_history(path)
-    assert tuple(table.columns) == HISTORY_COLUMNS and HISTORY_COLUMNS[-1] == "inherited_from"
+    assert tuple(table.columns) == HISTORY_COLUMNS and HISTORY_COLUMNS[-1] == "eval_mean_return"
     back = [HistoryRow.from_record(r) for r in table.to_dict("records")]
     assert back[2] == rows[2] and back[0].parents == () and math.isnan(back[0].threshold)
     assert back[0].inherited_from == "" and back[2].inherited_from == "robot-1"
-    table.drop(columns=["threshold", "status", "predicted", "inherited_from"]).to_csv(
-        path, index=False)
+    table.drop(columns=["threshold", "status", "predicted", "inherited_from",
+                        "eval_success_rate", "eval_mean_return"]).to_csv(path, index=False)
     old = [HistoryRow.from_record(r) for r in read_history(path).to_dict("records")]
     assert [r.name for r in old] == [r.name for r in rows]
     assert all(math.isnan(r.threshold) and r.status == "trained" and r.inherited_from == ""
@@ -187,7 +187,8 @@ def test_a_run_made_by_an_earlier_version_resumes_to_its_whole_history(tmp_path:
     assert done.returncode == 0, done.stderr[-3000:]
     history = read_history(run_dir / "history.csv")
     whole = read_history(OLD_RUN / "whole_history.csv")
-    assert list(history.columns) == [*whole.columns, "threshold", "inherited_from"]
+    assert list(history.columns) == [*whole.columns, "threshold", "inherited_from",
+                                     "eval_success_rate", "eval_mean_return"]
     assert history["inherited_from"].isna().all(), "no robot inherits by default"
     kept = whole[whole["birth"] < 4].drop(columns=["wall_seconds"])
     pd.testing.assert_frame_equal(history[whole.columns].drop(columns=["wall_seconds"])[:4],

@@ -438,6 +438,9 @@ class TrainResult:
         stopped_early: The curve hook stopped training before the budget was spent.
         kept_at: With ``keep_best``, the env steps at which the handed-back policy was
             evaluated best; None when it is the last one.
+        evaluation: The periodic evaluation (success rate, mean return) of the
+            handed-back policy: the last one, or the best with ``keep_best``; None
+            without ``eval_interval``.
     """
 
     fitness: float
@@ -450,6 +453,7 @@ class TrainResult:
     timing: dict[str, float] = field(default_factory=dict)
     stopped_early: bool = False
     kept_at: int | None = None
+    evaluation: tuple[float, float] | None = None
 
     @property
     def steps_per_second(self) -> float:

@@ -245,6 +245,7 @@ class PeriodicEvaluation:
         self.config, self.seed = config, seed
         self.done = 0  # evaluations so far
         self.best: tuple[float, float] | None = None
+        self.last: tuple[float, float] | None = None
         self.best_state: dict[str, Any] | None = None
         self.best_steps = 0
         self.seconds = 0.0
@@ -259,7 +260,7 @@ class PeriodicEvaluation:
         result = evaluate_policy(self.robot, policy, physics=self.physics, env=self.env,
                                  episodes=self.config.eval_interval_episodes,
                                  seed=self.seed + 2, scene=self.scene)
-        score = (result.success_rate, result.mean_return)
+        score = self.last = (result.success_rate, result.mean_return)
         if self.config.keep_best and (self.best is None or score > self.best):
             self.best, self.best_steps = score, steps
             self.best_state = copy.deepcopy(
@@ -344,12 +345,13 @@ def _train(
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
     kept_at = periodic.finish(policy, timing) if periodic else None
+    evaluation = (periodic.best if kept_at is not None else periodic.last) if periodic else None
     policy.head.log_std_cap = None  # the trained policy's own spread from here on
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
                        env_steps=steps, episodes=returns_count,
                        wall_seconds=time.perf_counter() - start,
                        unstable=env.core.unstable_count, timing=timing, stopped_early=stopped,
-                       kept_at=kept_at)
+                       kept_at=kept_at, evaluation=evaluation)
 
 
 def _anneal(policy: Policy, config: LearnerConfig, steps: int, budget: int) -> None:

@@ -74,6 +74,11 @@ class HistoryRow:
         inherited_from: The parent whose trained policy its training started from
             (``ga.inheritance``); "" when it started from scratch, and in runs recorded
             before the column existed.
+        eval_success_rate: The deterministic (mean action) success rate of the policy
+            its training handed back, from the periodic evaluations
+            (``learner.eval_interval``: the last one, or the best with
+            ``learner.keep_best``); None (an empty cell) without them.
+        eval_mean_return: That evaluation's mean return.
     """
 
     birth: int
@@ -96,6 +101,8 @@ class HistoryRow:
     predicted: float
     threshold: float = math.nan
     inherited_from: str = ""
+    eval_success_rate: float | None = None
+    eval_mean_return: float | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -122,8 +129,8 @@ class HistoryRow:
     def from_record(cls, row: Mapping[str, Any]) -> HistoryRow:
         """The row ``record()`` wrote, from ``state.json`` or a row of :func:`read_history`
         (an empty text cell, read as NaN, is ""); a run from before ``status``,
-        ``predicted``, ``threshold`` and ``inherited_from`` existed gets
-        ``trained``/``failed``, NaN, NaN and "".
+        ``predicted``, ``threshold``, ``inherited_from`` and the evaluation's columns existed
+        gets ``trained``/``failed``, NaN, NaN, "" and None.
 
         Raises:
             KeyError, TypeError, ValueError: A missing column or a value of the wrong type.
@@ -151,7 +158,17 @@ class HistoryRow:
             predicted=float(row.get("predicted", math.nan)),
             threshold=float(row.get("threshold", math.nan)),
             inherited_from=_text(row.get("inherited_from")),
+            eval_success_rate=_number(row.get("eval_success_rate")),
+            eval_mean_return=_number(row.get("eval_mean_return")),
         )
+
+
+def _number(value: object) -> float | None:
+    """An optional number cell: None for a missing one (None, or NaN as pandas reads an
+    empty cell)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return None
+    return float(value)  # type: ignore[arg-type]
 
 
 def _text(value: object) -> str:
