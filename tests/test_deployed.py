@@ -1,0 +1,176 @@
+"""The deployed controller: periodic deterministic evaluations, the policy kept at the
+best of them, a mean bounded to the action box and an annealed spread (SPEC section 4)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from evo.envs.params import EnvConfig, TaskParams, observation_size
+from evo.learners.common import load_checkpoint, make_policy, save_checkpoint
+from evo.learners.ppo import PPO
+from evo.learners.ppo import train as train_ppo
+from evo.learners.rollouts import evaluate_policy
+from evo.robot import load_robot
+from evo.robot.builder import PhysicsParams
+
+FOUR_WHEELER = load_robot("robots/four_wheeler.json")
+PHYSICS = PhysicsParams()
+# tests/test_learners.py's small case: near targets, 200-step episodes, 60k env steps.
+NEAR = EnvConfig(task=TaskParams(t_max=200, target_min=0.3, target_max=0.6))
+BUDGET = 60_000
+SMALL = PPO(num_envs=16, rollout_steps=64, epochs=10, minibatch_size=512)
+WATCHED = dataclasses.replace(SMALL, eval_interval=12_000, eval_interval_episodes=8,
+                              keep_best=True)
+SEED = 1
+
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+@pytest.fixture(scope="module")
+def watched():  # noqa: ANN201
+    """The small case trained with periodic evaluations and the best policy kept."""
+    return train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=WATCHED, budget=BUDGET,
+                     seed=SEED)
+
+
+def test_the_evaluations_leave_the_training_as_it_was(watched) -> None:  # noqa: ANN001
+    """They take no random numbers and no env steps of the training's: with them on, the
+    curve up to two batches past the first evaluation is the one without them."""
+    batches = WATCHED.eval_interval // SMALL.frames_per_batch + 2
+    plain = train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=SMALL, budget=BUDGET,
+                      seed=SEED, on_curve=lambda row: row["env_steps"] >= batches
+                      * SMALL.frames_per_batch)
+    assert len(plain.curve) == batches
+    first = watched.curve.iloc[:batches]
+    assert first["eval/success_rate"].notna().any(), "an evaluation among them"
+    train_keys = [c for c in plain.curve.columns if c != "wall_seconds"]
+    pd.testing.assert_frame_equal(first[train_keys].reset_index(drop=True),
+                                  plain.curve[train_keys])
+    assert watched.env_steps == math.ceil(BUDGET / SMALL.frames_per_batch) * (
+        SMALL.frames_per_batch)
+
+
+def test_evaluations_come_at_each_interval_and_after_the_last_batch(watched) -> None:  # noqa: ANN001
+    curve = watched.curve
+    evaluated = curve.dropna(subset=["eval/success_rate"])
+    steps = evaluated["env_steps"].to_numpy()
+    final, interval = int(curve["env_steps"].iloc[-1]), WATCHED.eval_interval
+    crossed = final // interval > (final - SMALL.frames_per_batch) // interval
+    assert len(evaluated) == final // interval + (0 if crossed else 1), steps
+    assert steps[-1] == final, "one after the last batch"
+    # Each is the first batch at or past its multiple of the interval.
+    for k, at in enumerate(steps[:-1], start=1):
+        assert at >= k * WATCHED.eval_interval > at - SMALL.frames_per_batch
+    assert curve["eval/mean_return"].notna().sum() == len(evaluated)
+    assert ((curve["train/mean_outside"] >= 0) & (curve["train/mean_outside"] <= 1)).all()
+    assert (curve["train/action_std"] > 0).all()
+
+
+def test_the_kept_policy_is_the_one_that_scored_best(watched) -> None:  # noqa: ANN001
+    """Evaluated again on the periodic evaluations' episodes (seed + 2), the handed-back
+    policy scores the best row of the curve, and its env steps are that row's."""
+    evaluated = watched.curve.dropna(subset=["eval/success_rate"])
+    again = evaluate_policy(FOUR_WHEELER, watched.policy, physics=PHYSICS, env=NEAR,
+                            episodes=WATCHED.eval_interval_episodes, seed=SEED + 2)
+    scores = list(zip(evaluated["eval/success_rate"], evaluated["eval/mean_return"],
+                      strict=True))
+    best = max(range(len(scores)), key=lambda i: scores[i])  # the first of equals
+    assert (again.success_rate, again.mean_return) == pytest.approx(scores[best])
+    assert watched.kept_at == evaluated["env_steps"].iloc[best]
+
+
+def test_the_kept_policy_is_written_and_read_back_as_it_acts(watched, tmp_path: Path) -> None:  # noqa: ANN001
+    """What a run writes to ``policy.pt`` (and a resumed run, an offspring or a replay
+    reads) is the kept policy."""
+    loaded = load_checkpoint(save_checkpoint(watched.policy, tmp_path / "p.pt", WATCHED))
+    obs = torch.randn(64, observation_size(FOUR_WHEELER, NEAR.task)) * 3
+    torch.testing.assert_close(loaded.mean_action(obs), watched.policy.mean_action(obs),
+                               rtol=0, atol=0)
+
+
+def test_deterministic_success_matches_the_noisy_policys(watched) -> None:  # noqa: ANN001
+    """A robot that can do the task: the deployed (mean) action succeeds as often as the
+    policy with its noise, within 0.05, on 20 episodes neither was chosen on."""
+    deterministic, noisy = (
+        evaluate_policy(FOUR_WHEELER, watched.policy, physics=PHYSICS, env=NEAR, episodes=20,
+                        seed=99, stochastic=stochastic) for stochastic in (False, True))
+    assert noisy.success_rate >= 0.6, noisy
+    assert deterministic.success_rate >= noisy.success_rate - 0.05, (deterministic, noisy)
+
+
+def test_a_stochastic_evaluation_is_seeded_and_leaves_torchs_generator_alone(watched) -> None:  # noqa: ANN001
+    state = torch.random.get_rng_state()
+    runs = [evaluate_policy(FOUR_WHEELER, watched.policy, physics=PHYSICS, env=NEAR, episodes=4,
+                            seed=s, stochastic=True) for s in (7, 7)]
+    assert runs[0] == runs[1]
+    assert torch.equal(torch.random.get_rng_state(), state)
+
+
+def test_a_bounded_mean_stays_in_the_action_box_and_survives_its_checkpoint(
+    tmp_path: Path,
+) -> None:
+    config = PPO(bound_mean=True, policy_out_gain=50.0)  # a mean far outside, unbounded
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(0)
+        policy = make_policy(12, 3, config)
+        torch.manual_seed(0)
+        unbounded = make_policy(12, 3, dataclasses.replace(config, bound_mean=False))
+    obs = torch.randn(256, 12) * 3
+    assert policy.mean_action(obs).abs().max() <= 1
+    assert unbounded.mean_action(obs).abs().max() > 1
+    torch.testing.assert_close(policy.mean_action(obs), torch.tanh(unbounded.mean_action(obs)))
+    loaded = load_checkpoint(save_checkpoint(policy, tmp_path / "p.pt", config))
+    torch.testing.assert_close(loaded.mean_action(obs), policy.mean_action(obs), rtol=0, atol=0)
+
+
+def test_an_annealed_spread_stays_under_its_bound() -> None:
+    """The batches' standard deviation is at most the bound, which falls linearly from
+    ``init_log_std`` to ``final_log_std`` over the budget."""
+    config = dataclasses.replace(SMALL, init_log_std=-0.5, final_log_std=-2.0)
+    budget = 4 * SMALL.frames_per_batch
+    result = train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=config, budget=budget,
+                       seed=3)
+    before = (result.curve["env_steps"] - SMALL.frames_per_batch).to_numpy()
+    bound = np.exp(-0.5 + (-2.0 + 0.5) * before / budget)
+    stds = result.curve["train/action_std"].to_numpy()
+    assert (stds <= bound + 1e-6).all(), (stds, bound)
+    assert stds[-1] < stds[0] and stds[-1] == pytest.approx(bound[-1], rel=1e-5)
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    (dict(keep_best=True), "keep_best needs periodic evaluations"),
+    (dict(eval_interval=-1), "eval_interval must be >= 0"),
+    (dict(eval_interval_episodes=0), "eval_interval_episodes must be >= 1"),
+    (dict(final_log_std=3.0), "final_log_std must be in"),
+])
+def test_bad_settings_name_their_key(fields: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        PPO(**fields)  # type: ignore[arg-type]
+
+
+def test_a_runs_history_carries_the_deterministic_evaluation_beside_the_fitness(
+    tmp_path: Path,
+) -> None:
+    """With ``learner.eval_interval`` every trained robot's row has the success rate and
+    return of its handed-back policy's periodic evaluation; without it the cells are
+    empty (a run of before reads the same)."""
+    from test_evolution import TINY, main_cmd, run
+
+    from evo.run.records import read_history
+
+    run_dir = tmp_path / "run"
+    done = run(main_cmd(*TINY, "executor=serial", "learner.eval_interval=256",
+                        "learner.eval_interval_episodes=2", "learner.keep_best=true",
+                        f"hydra.run.dir={run_dir}"), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    history = read_history(run_dir / "history.csv")
+    assert history["eval_success_rate"].between(0, 1).all(), history
+    assert history["eval_mean_return"].notna().all()
