@@ -44,7 +44,7 @@ from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
 from evo.envs.params import REWARD_TERMS, EnvConfig
-from evo.envs.reach import make_env
+from evo.envs.reach import ReachEnv, make_env
 from evo.envs.scene import Scene, compile_scene
 from evo.learners import CurveHook, EpisodeHook, Learner
 from evo.learners.common import (
@@ -268,17 +268,19 @@ class PeriodicEvaluation:
         self.seconds += time.perf_counter() - tick
         return dict(zip(self.KEYS, score, strict=True))
 
-    def finish(self, policy: Policy, timing: dict[str, float]) -> int | None:
+    def finish(self, policy: Policy, timing: dict[str, float]
+               ) -> tuple[int | None, tuple[float, float] | None]:
         """Load the best evaluation's weights into ``policy`` and move the evaluations'
-        seconds from ``timing``'s update to its ``eval``; the env steps the kept policy
-        was evaluated at (None without ``keep_best``)."""
+        seconds from ``timing``'s update to its ``eval``. Returns the env steps the kept
+        policy was evaluated at (None without ``keep_best``) and the handed-back
+        policy's evaluation (the best, or the last)."""
         timing["update"] -= self.seconds
         timing["eval"] = self.seconds
         if self.best_state is None:
-            return None
+            return None, self.last
         policy.actor.load_state_dict(self.best_state["actor"])
         policy.critic.load_state_dict(self.best_state["critic"])
-        return self.best_steps
+        return self.best_steps, self.best
 
 
 def _train(
@@ -293,28 +295,17 @@ def _train(
     inheritance: Inheritance | None = None, scene: Scene | None = None,
 ) -> TrainResult:
     start = time.perf_counter()
-    if scene is None and config.eval_interval:  # compiled once for both
-        scene = compile_scene(robot, physics, env_config.arena, env_config.task)
-    env = make_env(robot, physics, env_config, config.num_envs, seed, scene)
-    if on_episode is not None:
-        env.core.watch(on_episode)
-    policy = make_policy(env.observation_spec["observation"].shape[-1],
-                         env.action_spec.shape[-1], config)  # sizes from the env specs
-    if inheritance is not None:
-        inherit(policy, inheritance)
+    env, policy, periodic = _setup(robot, physics, env_config, config, seed, scene, on_episode,
+                                   inheritance)
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
-    periodic = (PeriodicEvaluation(robot, physics, env_config, config, seed, scene)
-                if scene is not None and config.eval_interval else None)
     _anneal(policy, config, 0, budget)
-    collector = Collector(
-        env, policy.sampler(), frames_per_batch=config.frames_per_batch, total_frames=frames,
-        auto_register_policy_transforms=False, track_traj_ids=False,
-    )
+    collector = Collector(env, policy.sampler(), frames_per_batch=config.frames_per_batch,
+                          total_frames=frames, auto_register_policy_transforms=False,
+                          track_traj_ids=False)
     scale = RewardScale(config.num_envs, config.gamma) if config.reward_scaling else None
     rows: list[dict[str, float]] = []
-    returns_sum, returns_count, steps = 0.0, 0, 0
-    stopped = False
+    returns_sum, returns_count, steps, stopped = 0.0, 0, 0, False
     timing = dict.fromkeys(("collect", "update"), 0.0)
     tick = time.perf_counter()
     try:
@@ -344,14 +335,35 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
-    kept_at = periodic.finish(policy, timing) if periodic else None
-    evaluation = (periodic.best if kept_at is not None else periodic.last) if periodic else None
+    kept_at, evaluation = periodic.finish(policy, timing) if periodic else (None, None)
     policy.head.log_std_cap = None  # the trained policy's own spread from here on
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
                        env_steps=steps, episodes=returns_count,
                        wall_seconds=time.perf_counter() - start,
                        unstable=env.core.unstable_count, timing=timing, stopped_early=stopped,
                        kept_at=kept_at, evaluation=evaluation)
+
+
+def _setup(robot: Robot, physics: PhysicsParams, env_config: EnvConfig, config: LearnerConfig,
+           seed: int, scene: Scene | None, on_episode: EpisodeHook | None,
+           inheritance: Inheritance | None
+           ) -> tuple[ReachEnv, Policy, PeriodicEvaluation | None]:
+    """The training's arenas (watched by ``on_episode``), its fresh policy, sized by the
+    env's specs (a parent's, slot-mapped, with ``inheritance``), and its periodic
+    evaluations (``eval_interval``; the scene compiled once for both)."""
+    periodic = None
+    if config.eval_interval:
+        if scene is None:
+            scene = compile_scene(robot, physics, env_config.arena, env_config.task)
+        periodic = PeriodicEvaluation(robot, physics, env_config, config, seed, scene)
+    env = make_env(robot, physics, env_config, config.num_envs, seed, scene)
+    if on_episode is not None:
+        env.core.watch(on_episode)
+    policy = make_policy(env.observation_spec["observation"].shape[-1],
+                         env.action_spec.shape[-1], config)
+    if inheritance is not None:
+        inherit(policy, inheritance)
+    return env, policy, periodic
 
 
 def _anneal(policy: Policy, config: LearnerConfig, steps: int, budget: int) -> None:

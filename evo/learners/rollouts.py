@@ -133,14 +133,14 @@ def _evaluate(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConf
               episodes: int, seed: int, scene: Scene | None, stochastic: bool
               ) -> PolicyEvaluation:
     reach = make_env(robot, physics, env, episodes, seed, scene)
-    sampler = policy.sampler()
+    sampler = policy.sampler() if stochastic else None
     td = reach.reset()
     finished = torch.zeros(episodes, dtype=torch.bool)
     returns = torch.zeros(episodes)
     lengths = torch.zeros(episodes, dtype=torch.int64)
     success = torch.zeros(episodes, dtype=torch.bool)
     while not finished.all():
-        if stochastic:
+        if sampler is not None:
             with torch.no_grad():
                 td["action"] = sampler.sample(td["observation"])[2]
         else:
