@@ -131,15 +131,19 @@ def test_a_bounded_mean_stays_in_the_action_box_and_survives_its_checkpoint(
     torch.testing.assert_close(loaded.mean_action(obs), policy.mean_action(obs), rtol=0, atol=0)
 
 
-def test_an_annealed_spread_stays_under_its_bound() -> None:
-    """The batches' standard deviation is at most the bound, which falls linearly from
-    ``init_log_std`` to ``final_log_std`` over the budget."""
-    config = dataclasses.replace(SMALL, init_log_std=-0.5, final_log_std=-2.0)
+@pytest.mark.parametrize("anneal_from", [0.0, 0.5])
+def test_an_annealed_spread_stays_under_its_bound(anneal_from: float) -> None:
+    """The batches' standard deviation is at most the bound, which stays at
+    ``init_log_std`` until ``anneal_from`` of the budget and then falls linearly to
+    ``final_log_std`` at its end."""
+    config = dataclasses.replace(SMALL, init_log_std=-0.5, final_log_std=-2.0,
+                                 anneal_from=anneal_from)
     budget = 4 * SMALL.frames_per_batch
     result = train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=config, budget=budget,
                        seed=3)
     before = (result.curve["env_steps"] - SMALL.frames_per_batch).to_numpy()
-    bound = np.exp(-0.5 + (-2.0 + 0.5) * before / budget)
+    start = anneal_from * budget
+    bound = np.exp(-0.5 + (-2.0 + 0.5) * np.clip(before - start, 0, None) / (budget - start))
     stds = result.curve["train/action_std"].to_numpy()
     assert (stds <= bound + 1e-6).all(), (stds, bound)
     assert stds[-1] < stds[0] and stds[-1] == pytest.approx(bound[-1], rel=1e-5)
@@ -150,6 +154,7 @@ def test_an_annealed_spread_stays_under_its_bound() -> None:
     (dict(eval_interval=-1), "eval_interval must be >= 0"),
     (dict(eval_interval_episodes=0), "eval_interval_episodes must be >= 1"),
     (dict(final_log_std=3.0), "final_log_std must be in"),
+    (dict(anneal_from=1.0), "anneal_from must be in"),
 ])
 def test_bad_settings_name_their_key(fields: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):

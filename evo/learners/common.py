@@ -79,6 +79,9 @@ class LearnerConfig:
         final_log_std: Anneal an upper bound of the log standard deviation linearly
             from ``init_log_std`` at the first batch to this at the budget's end;
             None: no bound (the log std is learned freely).
+        anneal_from: The fraction of the budget at which that bound starts to fall
+            (before it the bound is ``init_log_std``): 0 anneals over the whole
+            budget, 0.5 over its second half.
     """
 
     update: bool = True
@@ -106,6 +109,7 @@ class LearnerConfig:
     keep_best: bool = False
     bound_mean: bool = False
     final_log_std: float | None = None
+    anneal_from: float = 0.0
 
     def __post_init__(self) -> None:
         at_least(self, 1, "total_steps", "num_envs", "rollout_steps", "epochs",
@@ -126,6 +130,9 @@ class LearnerConfig:
         if self.final_log_std is not None:
             within(self, -10, 2, "final_log_std", note=" (a standard deviation of e^-10 to "
                    "e^2), or null for none")
+        if not 0 <= self.anneal_from < 1:
+            raise ValueError(f"anneal_from must be in [0, 1) (a fraction of the budget), "
+                             f"got {self.anneal_from}")
         if self.keep_best and not self.eval_interval:
             raise ValueError("keep_best needs periodic evaluations to choose from: set "
                              "eval_interval (env steps) > 0")

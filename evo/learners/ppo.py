@@ -368,10 +368,12 @@ def _setup(robot: Robot, physics: PhysicsParams, env_config: EnvConfig, config: 
 
 def _anneal(policy: Policy, config: LearnerConfig, steps: int, budget: int) -> None:
     """With ``final_log_std``, bound the log std of the batches from ``steps`` on: from
-    ``init_log_std`` at 0 linearly to ``final_log_std`` at the budget."""
+    ``init_log_std`` until ``anneal_from`` of the budget, then linearly to
+    ``final_log_std`` at the budget."""
     if config.final_log_std is None:
         return
-    progress = min(1.0, steps / budget)
+    start = config.anneal_from * budget
+    progress = min(1.0, max(0.0, steps - start) / (budget - start))
     cap = config.init_log_std + (config.final_log_std - config.init_log_std) * progress
     policy.head.log_std_cap = cap
 
