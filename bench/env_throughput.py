@@ -6,7 +6,7 @@ For each example robot, arena, batch size N and thread count, this measures in o
   env's options, sleeping rocks included) for N arenas on the same number of threads
   with the same frame skip, random controls, no Python in between: the limit any
   environment on this model can reach;
-* ``env``: ``ReachEnv`` (TorchRL, random actions, automatic partial resets through
+* ``env``: ``TaskEnv`` (TorchRL, random actions, automatic partial resets through
   ``step_and_maybe_reset`` exactly as a collector drives it).
 
 Both are env steps per second (one env step = one control step of one arena). The ratio
@@ -31,12 +31,12 @@ from rich.console import Console
 from rich.table import Table
 
 from evo.envs.arena import ArenaParams
-from evo.envs.reach import ReachEnv
-from evo.envs.task import ReachCore
+from evo.envs.core import TaskCore
+from evo.envs.torchrl_env import TaskEnv
 from evo.robot import load_robot
 
 
-def raw_rate(env: ReachEnv, steps: int, rng: np.random.Generator) -> float:
+def raw_rate(env: TaskEnv, steps: int, rng: np.random.Generator) -> float:
     """Env steps/s of a bare ``mujoco.batch.Batch`` on the env's model, arenas, threads
     and current states (one ``step`` call of ``frame_skip`` physics steps per control
     step, as the env makes)."""
@@ -54,8 +54,8 @@ def raw_rate(env: ReachEnv, steps: int, rng: np.random.Generator) -> float:
     return n * steps / (time.perf_counter() - start)
 
 
-def env_rate(env: ReachEnv, steps: int) -> float:
-    """Env steps/s of ``ReachEnv`` driven like a collector, with random actions."""
+def env_rate(env: TaskEnv, steps: int) -> float:
+    """Env steps/s of ``TaskEnv`` driven like a collector, with random actions."""
     td = env.reset()
     start = time.perf_counter()
     for _ in range(steps):
@@ -75,7 +75,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats, best kept")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    table = Table(title="ReachEnv throughput (env steps/s) vs raw MuJoCo batch, same run")
+    table = Table(title="TaskEnv throughput (env steps/s) vs raw MuJoCo batch, same run")
     for column in ("robot", "arena", "N", "threads", "raw", "env", "env/raw"):
         table.add_column(column, justify="right")
     rng = np.random.default_rng(0)
@@ -86,7 +86,7 @@ def main() -> None:
             arena = getattr(ArenaParams, arena_name)()
             for n in args.num_envs:
                 for nthread in args.nthread:
-                    env = ReachEnv(ReachCore(robot, arena=arena, num_envs=n, nthread=nthread,
+                    env = TaskEnv(TaskCore(robot, arena=arena, num_envs=n, nthread=nthread,
                                              seed=0))
                     steps = max(20, args.steps * 12 // n)
                     env_rate(env, steps // 4)  # warm up

@@ -39,8 +39,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from evo.envs.arena import ArenaParams
-from evo.envs.params import TaskParams
-from evo.envs.task import ReachCore
+from evo.envs.core import TaskCore
+from evo.envs.tasks.reach import Reach
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -61,14 +61,14 @@ def parse_pair(text: str) -> tuple[float, int]:
     return float(timestep), int(substeps)
 
 
-def core_of(robot: Robot, pair: tuple[float, int], num_envs: int, t_max: int) -> ReachCore:
+def core_of(robot: Robot, pair: tuple[float, int], num_envs: int, t_max: int) -> TaskCore:
     """The clean arena with ``pair``'s physics, one thread, seed 0."""
     physics = dataclasses.replace(PhysicsParams(), timestep=pair[0])
-    task = dataclasses.replace(TaskParams(), frame_skip=pair[1], t_max=t_max)
-    return ReachCore(robot, physics, ArenaParams(), task, num_envs, 1, seed=0)
+    task = dataclasses.replace(Reach(), frame_skip=pair[1], t_max=t_max)
+    return TaskCore(robot, physics, ArenaParams(), task, num_envs, 1, seed=0)
 
 
-def cpu_rate(core: ReachCore, steps: int, rng: np.random.Generator) -> float:
+def cpu_rate(core: TaskCore, steps: int, rng: np.random.Generator) -> float:
     """Env steps per CPU-second of ``core``'s batch stepping ``frame_skip`` physics steps
     per control step under random controls."""
     controls = rng.uniform(-1, 1, (steps, core.num_envs, core.model.nu)) * core.ctrl_scale
@@ -81,7 +81,7 @@ def cpu_rate(core: ReachCore, steps: int, rng: np.random.Generator) -> float:
     return core.num_envs * steps / (time.process_time() - start)
 
 
-def actions(core: ReachCore, steps: int, seed: int = 0) -> NDArray[np.float64]:
+def actions(core: TaskCore, steps: int, seed: int = 0) -> NDArray[np.float64]:
     """A fixed action sequence, (steps, arenas, actuators): uniform in [-1, 1], each draw
     held for :data:`HOLD` control steps."""
     rng = np.random.default_rng(seed)
@@ -89,7 +89,7 @@ def actions(core: ReachCore, steps: int, seed: int = 0) -> NDArray[np.float64]:
     return np.repeat(draws, HOLD, axis=0)[:steps]
 
 
-def module_paths(core: ReachCore, sequence: NDArray[np.float64]
+def module_paths(core: TaskCore, sequence: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], int, int]:
     """Module positions after every control step (steps, arenas, modules, 3), and the
     unstable episodes and MuJoCo warnings of the run."""

@@ -43,7 +43,7 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 
 from evo.edge import compose_config, typed_config
-from evo.envs.reach import make_env
+from evo.envs.torchrl_env import make_env
 from evo.learners.common import (
     GaussianHead,
     GaussianSampler,

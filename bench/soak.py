@@ -34,7 +34,8 @@ from rich.console import Console
 from rich.table import Table
 
 from evo.components.executors import EvalExecutor, LocalExecutor, RayExecutor, SerialExecutor
-from evo.envs.params import EnvConfig, TaskParams
+from evo.envs.params import EnvConfig
+from evo.envs.tasks.reach import Reach
 from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
 from evo.pool import outcome_of
@@ -159,7 +160,7 @@ class Settings:
         learner = PPO(num_envs=2, rollout_steps=64, epochs=1, minibatch_size=64,
                                 hidden=(32, 32), eval_episodes=0)
         record = RecordConfig() if self.record else RecordConfig(mcap=False, rerun=False)
-        return Job(PhysicsParams(), EnvConfig(task=TaskParams(t_max=50)), learner, run_dir,
+        return Job(PhysicsParams(), EnvConfig(task=Reach(t_max=50)), learner, run_dir,
                    record=record)
 
 

@@ -45,7 +45,7 @@ from rich.console import Console
 from rich.table import Table
 
 from evo.edge import TrainingParts, compose_config, typed_config
-from evo.envs.reach import make_env
+from evo.envs.torchrl_env import make_env
 from evo.learners.ppo import train
 from evo.learners.rollouts import evaluate_policy
 from evo.record import read_curve

@@ -24,7 +24,7 @@ import pandas as pd
 
 from analysis import designer, plots
 from analysis.load import load_runs
-from evo.envs.gym_env import ReachGymEnv
+from evo.envs.gym_env import TaskGymEnv
 from evo.record import read_curve
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -42,7 +42,7 @@ def main() -> None:
     args = parser.parse_args()
     robots = [load_robot(p) for p in sorted(glob.glob("robots/*.json"))]
     print(contact_sheet(robots, PhysicsParams(), HERE / "robots.png"))
-    env = ReachGymEnv("robots/four_wheeler.json", arena="cluttered", render_mode="rgb_array")
+    env = TaskGymEnv("robots/four_wheeler.json", arena="cluttered", render_mode="rgb_array")
     env.reset(seed=4)
     for _ in range(20):
         env.step(np.array([1.0, 1.0, 0.0]))

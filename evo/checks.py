@@ -8,7 +8,7 @@ tuple of numbers (``friction``, ``hidden``) is checked element by element.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 
 def _values(value: object) -> Iterable[float]:
@@ -46,3 +46,10 @@ def within(obj: object, low: float, high: float, *names: str, note: str = "") ->
         value = getattr(obj, name)
         if any(not low <= v <= high for v in _values(value)):
             raise ValueError(f"{name} must be in [{low:g}, {high:g}]{note}, got {value}")
+
+
+SWAPPABLE: Mapping[str, object] = {"swappable": True}
+"""The ``metadata`` of a dataclass field that is a swappable part
+(``field(default_factory=Roulette, metadata=SWAPPABLE)``): its config node names its
+class with ``_target_`` (each item's, for a tuple), so a config may name a subclass. The
+defaults :mod:`evo.schemas` registers carry that ``_target_``."""

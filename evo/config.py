@@ -229,7 +229,9 @@ def current(cfg: DictConfig) -> DictConfig:
     * a ``learner`` without ``_target_`` (``name: ppo|random`` and ``update``) becomes
       the class :data:`OLD_LEARNERS` names, with its other keys, ``update`` included;
     * a ``noise_ceiling`` node (the retrain task's keys before they were ``retrain``'s)
-      becomes ``retrain``, without ``resamples`` (the report's, not the trainings').
+      becomes ``retrain``, without ``resamples`` (the report's, not the trainings');
+    * an ``env.task`` without ``_target_`` (before tasks were plug-ins) is the reach
+      task, :data:`OLD_TASK`.
 
     A config in today's form comes back as it was (a copy; ``cfg`` is left alone).
 
@@ -255,12 +257,20 @@ def current(cfg: DictConfig) -> DictConfig:
                 raise ConfigError(f"learner.name: unknown learner {name!r}; expected one of "
                                   f"{', '.join(OLD_LEARNERS)}")
             learner._target_ = OLD_LEARNERS[name]
+        env = out.get("env")
+        if isinstance(env, DictConfig) and isinstance(env.get("task"), DictConfig) and (
+                "_target_" not in env.task):
+            env.task._target_ = OLD_TASK
         older = out.pop(OLD_RETRAIN, None)
         if isinstance(older, DictConfig) and "retrain" not in out:
             older.pop("resamples", None)
             out.retrain = older
     return out
 
+
+OLD_TASK = "evo.envs.tasks.reach.Reach"
+"""The task of an ``env.task`` node without ``_target_`` (a config of before tasks were
+plug-ins)."""
 
 OLD_RETRAIN = "noise_ceiling"
 """The retrain task's config node before it was ``retrain`` (an older ``config.yaml``,
@@ -294,13 +304,6 @@ def _mutation(op: Any, key: str) -> Any:
                           f"{', '.join(MUTATIONS)}")
     cls = type(MUTATIONS[op])
     return {"_target_": f"{cls.__module__}.{cls.__qualname__}"}
-
-
-SWAPPABLE: Mapping[str, object] = {"swappable": True}
-"""The ``metadata`` of a dataclass field that is a swappable part
-(``field(default_factory=Roulette, metadata=SWAPPABLE)``): its config node names its
-class with ``_target_`` (each item's, for a tuple), so a config may name a subclass. The
-defaults :mod:`evo.schemas` registers carry that ``_target_``."""
 
 
 def swappable(field: dataclasses.Field[Any]) -> bool:

@@ -1,6 +1,6 @@
 """One episode of one arena, frame by frame: what the task traces and the recorders write.
 
-The environment's tracer (``ReachCore.watch``) and the replays (``evo.learners.rollouts.play``)
+The environment's tracer (``TaskCore.watch``) and the replays (``evo.learners.rollouts.play``)
 produce episodes; the MCAP and rerun recorders write them, ``evo.record.read_episodes``
 reads them back, and ``evo.replay`` redraws them from ``qpos``.
 """

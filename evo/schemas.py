@@ -92,6 +92,8 @@ def schemas() -> dict[str, dict[str, Any]]:
     from evo.components.executors import LocalExecutor, RayExecutor, SerialExecutor
     from evo.components.ga import GAConfig
     from evo.envs.params import EnvConfig
+    from evo.envs.tasks.locomotion import Locomotion
+    from evo.envs.tasks.reach import Reach
     from evo.learners.ppo import PPO
     from evo.record.config import RecordConfig
     from evo.retrain import RetrainConfig
@@ -103,7 +105,10 @@ def schemas() -> dict[str, dict[str, Any]]:
         "morphology/default": {"generator": defaults_node(GeneratorParams),
                                "limits": defaults_node(Limits),
                                "physics": defaults_node(PhysicsParams)},
-        "env/clean": defaults_node(EnvConfig),
+        # env.task is the conf/env/task group's choice.
+        "env/clean": defaults_node(EnvConfig, omit=("task",)),
+        "env/task/reach": defaults_node(Reach, target=True),
+        "env/task/locomotion": defaults_node(Locomotion, target=True),
         "learner/ppo": defaults_node(PPO, target=True),
         # ga.structure is the conf/ga/structure group's choice.
         "ga/steady_state": defaults_node(GAConfig, omit=("structure",)),

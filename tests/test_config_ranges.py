@@ -32,6 +32,7 @@ CONFIGS = {
     "local": ["+exp=smoke", "env=cluttered"],
     "ray": ["+exp=smoke", "env=cluttered", "executor=ray"],
     "serial": ["+exp=smoke", "env=cluttered", "executor=serial"],
+    "locomotion": ["+exp=smoke", "env/task=locomotion"],
 }
 """Composed configs whose numeric keys are enumerated (every executor option; the other
 groups' options share their keys)."""
@@ -81,6 +82,8 @@ BAD: dict[str, Any] = {
     "env.task.target_min": -1.0,
     "env.task.target_max": 0.1,
     "env.task.max_height": 0.0,
+    "env.task.heading_range": 181.0,
+    "env.task.success_distance": 0.0,
     "learner.total_steps": 0,
     "learner.num_envs": 0,
     "learner.rollout_steps": 0,
@@ -99,6 +102,7 @@ BAD: dict[str, Any] = {
     "learner.eval_episodes": -1,
     "learner.eval_interval": -1,
     "learner.eval_interval_episodes": 0,
+    "learner.anneal_from": 1.0,
     "ga.population_size": 1,
     "ga.robot_budget": 2,
     "ga.selection.epsilon": 0.0,
@@ -139,6 +143,8 @@ TOGETHER = [
      "ga.schedule: 4 env steps give each of learner.num_envs=8 arenas no control step"),
     (["learner.num_envs=4096"], "ga.schedule: 2,048 env steps give each of"),
     (["env.task.target_max=1.96"], "env.task: target_max (1.96 m) must be below half the arena"),
+    (["env/task=locomotion", "env.arena.side=2"],
+     "env.task: success_distance (1.0 m) must be below half the arena side less a wall"),
     (["ga.robot_budget=3"], "ga: robot_budget (3) must be >= population_size (4)"),
 ]
 """Values out of range only together with others: (overrides, what the error says)."""

@@ -12,7 +12,8 @@ import pandas as pd
 import pytest
 import torch
 
-from evo.envs.params import EnvConfig, TaskParams, observation_size
+from evo.envs.params import EnvConfig, observation_size
+from evo.envs.tasks.reach import Reach
 from evo.learners.common import load_checkpoint, make_policy, save_checkpoint
 from evo.learners.ppo import PPO
 from evo.learners.ppo import train as train_ppo
@@ -23,7 +24,7 @@ from evo.robot.builder import PhysicsParams
 FOUR_WHEELER = load_robot("robots/four_wheeler.json")
 PHYSICS = PhysicsParams()
 # tests/test_learners.py's small case: near targets, 200-step episodes, 60k env steps.
-NEAR = EnvConfig(task=TaskParams(t_max=200, target_min=0.3, target_max=0.6))
+NEAR = EnvConfig(task=Reach(t_max=200, target_min=0.3, target_max=0.6))
 BUDGET = 60_000
 SMALL = PPO(num_envs=16, rollout_steps=64, epochs=10, minibatch_size=512)
 WATCHED = dataclasses.replace(SMALL, eval_interval=12_000, eval_interval_episodes=8,

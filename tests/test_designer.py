@@ -38,7 +38,8 @@ from analysis.designer import (
     write_figures,
 )
 from analysis.plots import ORIGIN_COLORS, plot_designer
-from evo.envs.params import EnvConfig, TaskParams
+from evo.envs.params import EnvConfig
+from evo.envs.tasks.reach import Reach
 from evo.learners.rollouts import PolicyEvaluation, evaluate_policy
 from evo.robot import load_robot, save_robot
 from evo.robot.builder import PhysicsParams
@@ -63,19 +64,19 @@ class StandStill:
 
 
 def test_time_to_target_counts_the_episodes_that_reached_it() -> None:
-    at_start = EnvConfig(task=TaskParams(t_max=40, target_min=0.0, target_max=0.0))
+    at_start = EnvConfig(task=Reach(t_max=40, target_min=0.0, target_max=0.0))
     reached = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(), env=at_start,
                               episodes=3, seed=0)  # type: ignore[arg-type]
     assert reached.successes == (True,) * 3 and reached.lengths == (1,) * 3, reached
     assert reached.time_to_target == pytest.approx(0.005 * 10), "one control step of 0.05 s"
-    far = EnvConfig(task=TaskParams(t_max=40))
+    far = EnvConfig(task=Reach(t_max=40))
     missed = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(), env=far,
                              episodes=3, seed=0)  # type: ignore[arg-type]
     assert missed.success_rate == 0 and missed.lengths == (40,) * 3, missed
     assert missed.time_to_target is None, "no episode reached the target"
     assert missed.summary()["time_to_target"] is None and missed.summary()["lengths"] == [40] * 3
     coarse = evaluate_policy(FOUR_WHEELER, StandStill(), physics=PhysicsParams(timestep=0.01),
-                             env=EnvConfig(task=TaskParams(t_max=40, frame_skip=5,
+                             env=EnvConfig(task=Reach(t_max=40, frame_skip=5,
                                                            target_min=0.0, target_max=0.0)),
                              episodes=1, seed=0)  # type: ignore[arg-type]
     assert coarse.control_step == pytest.approx(0.05), "timestep x frame_skip"

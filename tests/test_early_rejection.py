@@ -25,7 +25,8 @@ from test_evolution import (
 )
 
 from evo.early_rejection import Curve, EarlyRejection, StoppingRule, predict, replay_rule
-from evo.envs.params import EnvConfig, TaskParams
+from evo.envs.params import EnvConfig
+from evo.envs.tasks.reach import Reach
 from evo.evaluation import Job, Outcome, evaluate
 from evo.learners.ppo import PPO
 from evo.robot import load_robot
@@ -110,7 +111,7 @@ def test_bad_settings_are_named(change: dict[str, object], message: str) -> None
 
 # ---------------------------------------------------------------- a real evaluation
 
-NEAR = EnvConfig(task=TaskParams(t_max=40))
+NEAR = EnvConfig(task=Reach(t_max=40))
 TINY_LEARNER = PPO(num_envs=4, rollout_steps=64, epochs=1, minibatch_size=128,
                              hidden=(32, 32))
 

@@ -16,10 +16,10 @@ from torchrl.envs.utils import check_env_specs
 
 import evo.envs
 from evo.envs.arena import ArenaParams
-from evo.envs.params import REWARD_TERMS, TaskParams
-from evo.envs.reach import ReachEnv
+from evo.envs.core import TaskCore
 from evo.envs.scene import Scene, compile_scene
-from evo.envs.task import ReachCore
+from evo.envs.tasks.reach import Reach
+from evo.envs.torchrl_env import TaskEnv
 from evo.episode import Episode
 from evo.record.config import EpisodeChoice
 from evo.robot import Robot, load_robot
@@ -32,7 +32,7 @@ def robot(name: str = "four_wheeler") -> Robot:
     return load_robot(f"robots/{name}.json")
 
 
-def forward(core: ReachCore, sign: float = 1.0) -> np.ndarray:
+def forward(core: TaskCore, sign: float = 1.0) -> np.ndarray:
     """All motors at ``sign``, pivots held straight."""
     action = np.zeros((core.num_envs, core.action_size))
     action[:, : len(core.built.motors)] = sign
@@ -42,11 +42,11 @@ def forward(core: ReachCore, sign: float = 1.0) -> np.ndarray:
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_sizes_follow_the_robot(name: str) -> None:
     r = robot(name)
-    core = ReachCore(r, num_envs=3, seed=0)
+    core = TaskCore(r, num_envs=3, seed=0)
     m, n = r.n_motors, r.n_pivots
     assert core.reset().shape == (3, 9 + 2 * (m + n))
     assert core.action_size == m + n == core.model.nu
-    up = ReachCore(r, task=TaskParams(observe_up=True), num_envs=2, seed=0)
+    up = TaskCore(r, task=Reach(observe_up=True), num_envs=2, seed=0)
     obs = up.reset()
     assert obs.shape == (2, 12 + 2 * (m + n))
     # At rest, upright: gravity points down the brain's -z.
@@ -54,7 +54,7 @@ def test_sizes_follow_the_robot(name: str) -> None:
 
 
 def test_state_layout_is_time_qpos_qvel() -> None:
-    core = ReachCore(robot(), arena=ArenaParams.cluttered(), num_envs=2, seed=1)
+    core = TaskCore(robot(), arena=ArenaParams.cluttered(), num_envs=2, seed=1)
     core.reset()
     data = mujoco.MjData(core.model)
     mujoco.mj_setState(core.model, data, core.state[1], mujoco.mjtState.mjSTATE_INTEGRATION)
@@ -63,7 +63,7 @@ def test_state_layout_is_time_qpos_qvel() -> None:
 
 
 def test_observation_reports_direction_and_distance_to_target() -> None:
-    core = ReachCore(robot(), num_envs=2, seed=0)
+    core = TaskCore(robot(), num_envs=2, seed=0)
     core.reset()
     obs = core.set_target(0, [0.0, 1.0])  # to the robot's left (brain +y)
     obs = core.set_target(1, [1.0, 0.0])  # straight ahead
@@ -75,7 +75,7 @@ def test_observation_reports_direction_and_distance_to_target() -> None:
 
 
 def test_approach_reward_is_positive_when_closing_in_and_terms_sum_to_reward() -> None:
-    core = ReachCore(robot(), num_envs=2, seed=0)
+    core = TaskCore(robot(), num_envs=2, seed=0)
     core.reset()
     for arena in (0, 1):
         core.set_target(arena, [1.2, 0.0])
@@ -83,7 +83,7 @@ def test_approach_reward_is_positive_when_closing_in_and_terms_sum_to_reward() -
     approach = np.zeros(2)
     for _ in range(40):
         step = core.step(action)
-        total = sum(step.terms[name] for name in REWARD_TERMS)
+        total = sum(step.terms[name] for name in Reach.reward_terms)
         np.testing.assert_allclose(step.reward, total)
         np.testing.assert_allclose(step.terms["time"], -1 / core.task.t_max)
         approach += step.terms["approach"]
@@ -92,7 +92,7 @@ def test_approach_reward_is_positive_when_closing_in_and_terms_sum_to_reward() -
 
 
 def test_success_terminates_with_bonus() -> None:
-    core = ReachCore(robot(), num_envs=1, seed=0)
+    core = TaskCore(robot(), num_envs=1, seed=0)
     core.reset()
     core.set_target(0, [0.35, 0.0])
     steps = 0
@@ -108,7 +108,7 @@ def test_success_terminates_with_bonus() -> None:
 
 
 def test_truncation_at_t_max_and_episode_return() -> None:
-    core = ReachCore(robot(), task=TaskParams(t_max=25), num_envs=3, seed=0)
+    core = TaskCore(robot(), task=Reach(t_max=25), num_envs=3, seed=0)
     core.reset()
     rewards = []
     for _ in range(25):
@@ -121,7 +121,7 @@ def test_truncation_at_t_max_and_episode_return() -> None:
 
 def test_same_seed_same_trajectory_different_seed_different_target() -> None:
     def run(seed: int, nthread: int) -> tuple[np.ndarray, np.ndarray]:
-        core = ReachCore(
+        core = TaskCore(
             robot("inchworm"), arena=ArenaParams.cluttered(), num_envs=4, nthread=nthread,
             seed=seed,
         )
@@ -140,11 +140,11 @@ def test_same_seed_same_trajectory_different_seed_different_target() -> None:
 
 
 def test_arenas_given_the_compiled_scene_run_as_arenas_that_compile_their_own() -> None:
-    arena, task = ArenaParams.cluttered(), TaskParams()
+    arena, task = ArenaParams.cluttered(), Reach()
     scene = compile_scene(robot("inchworm"), PhysicsParams(), arena, task)
 
     def run(given: Scene | None) -> np.ndarray:
-        core = ReachCore(robot("inchworm"), arena=arena, num_envs=2, seed=5, scene=given)
+        core = TaskCore(robot("inchworm"), arena=arena, num_envs=2, seed=5, scene=given)
         core.reset()
         rng = np.random.default_rng(7)
         for _ in range(20):
@@ -154,13 +154,13 @@ def test_arenas_given_the_compiled_scene_run_as_arenas_that_compile_their_own() 
     first, again = run(scene), run(scene)  # two users of one model, one after the other
     np.testing.assert_array_equal(first, run(None))
     np.testing.assert_array_equal(again, first)
-    assert ReachCore(robot("inchworm"), arena=arena, scene=scene).model is scene.model
+    assert TaskCore(robot("inchworm"), arena=arena, scene=scene).model is scene.model
     with pytest.raises(ValueError, match="scene: compiled for another robot"):
-        ReachCore(robot("snake"), arena=arena, scene=scene)
+        TaskCore(robot("snake"), arena=arena, scene=scene)
 
 
 def test_targets_fill_the_annulus() -> None:
-    core = ReachCore(robot(), num_envs=200, seed=0)
+    core = TaskCore(robot(), num_envs=200, seed=0)
     core.reset()
     r = np.hypot(core.target[:, 0], core.target[:, 1])
     assert r.min() >= 0.5 and r.max() <= 1.5
@@ -171,7 +171,7 @@ def test_targets_fill_the_annulus() -> None:
 
 def test_rocks_lie_around_the_target_clear_of_the_start_and_move_when_pushed() -> None:
     arena = ArenaParams.cluttered()
-    core = ReachCore(robot(), arena=arena, num_envs=6, seed=2)
+    core = TaskCore(robot(), arena=arena, num_envs=6, seed=2)
     core.reset()
     rock_xyz = core.qpos[:, core.rock_qpos[:, None] + np.arange(3)]  # (N, rocks, 3)
     to_target = np.linalg.norm(rock_xyz[..., :2] - core.target[:, None, :2], axis=2)
@@ -191,7 +191,7 @@ def test_rocks_lie_around_the_target_clear_of_the_start_and_move_when_pushed() -
 
 
 def test_injected_nan_ends_only_that_arena_flagged() -> None:
-    env = ReachEnv(ReachCore(robot(), num_envs=4, seed=0))
+    env = TaskEnv(TaskCore(robot(), num_envs=4, seed=0))
     td = env.reset()
     env.core.qvel[2, 0] = np.nan
     td["action"] = torch.zeros(4, env.core.action_size)
@@ -210,7 +210,7 @@ def test_a_thrown_robot_ends_unstable_and_earns_only_the_time_penalty() -> None:
     """A contact blow-up can stay finite and throw the robot: up past ``max_height`` or
     out over the walls, where the approach term would pay for the distance. Either ends
     that arena's episode as unstable; driving about never does."""
-    core = ReachCore(robot(), num_envs=4, seed=0)
+    core = TaskCore(robot(), num_envs=4, seed=0)
     core.reset()
     for _ in range(40):
         assert not core.step(forward(core)).unstable.any()
@@ -233,7 +233,7 @@ def test_traced_episodes_are_numbered_and_a_blown_up_one_is_flagged_and_not_reco
     from evo.evaluation import EpisodeSampler
     from evo.record import McapRecorder, RecordConfig, read_episodes
 
-    core = ReachCore(robot(), task=TaskParams(t_max=6), num_envs=2, seed=0)
+    core = TaskCore(robot(), task=Reach(t_max=6), num_envs=2, seed=0)
     seen: list[Episode] = []
     core.watch(seen.append)
     zero = np.zeros((2, core.action_size))
@@ -259,7 +259,7 @@ def test_traced_episodes_are_numbered_and_a_blown_up_one_is_flagged_and_not_reco
 
 
 def test_partial_reset_touches_only_masked_arenas() -> None:
-    env = ReachEnv(ReachCore(robot(), num_envs=3, seed=0))
+    env = TaskEnv(TaskCore(robot(), num_envs=3, seed=0))
     td = env.reset()
     td["action"] = torch.zeros(3, env.core.action_size)
     for _ in range(5):
@@ -275,12 +275,12 @@ def test_partial_reset_touches_only_masked_arenas() -> None:
 
 @pytest.mark.parametrize("arena", ["clean", "cluttered"])
 def test_torchrl_env_passes_check_env_specs(arena: str) -> None:
-    env = ReachEnv(ReachCore(robot("snake"), arena=getattr(ArenaParams, arena)(), num_envs=5,
+    env = TaskEnv(TaskCore(robot("snake"), arena=getattr(ArenaParams, arena)(), num_envs=5,
                                seed=0))
     check_env_specs(env, seed=0)
     rollout = env.rollout(12, break_when_any_done=False)
     assert rollout.batch_size == torch.Size([5, 12])
-    terms = sum(rollout["next", "reward_terms", name] for name in REWARD_TERMS)
+    terms = sum(rollout["next", "reward_terms", name] for name in Reach.reward_terms)
     torch.testing.assert_close(terms, rollout["next", "reward"])
 
 
@@ -293,13 +293,13 @@ def test_gymnasium_env_registered_and_passes_check_env() -> None:
     obs2, _ = env.reset(seed=5)
     np.testing.assert_array_equal(obs, obs2)
     _, reward, terminated, truncated, info = env.step(env.action_space.sample())
-    assert reward == pytest.approx(sum(info[f"reward/{t}"] for t in REWARD_TERMS))
+    assert reward == pytest.approx(sum(info[f"reward/{t}"] for t in Reach.reward_terms))
     assert not (terminated or truncated)
 
 
 def test_gymnasium_and_torchrl_faces_agree() -> None:
     env = gym.make("evo/Reach-v0", robot=robot("inchworm")).unwrapped
-    batched = ReachEnv(ReachCore(robot("inchworm"), num_envs=1, seed=11))
+    batched = TaskEnv(TaskCore(robot("inchworm"), num_envs=1, seed=11))
     obs, _ = env.reset(seed=11)
     td = batched.reset()
     np.testing.assert_array_equal(obs, td["observation"][0].numpy())
@@ -325,7 +325,7 @@ def drive_through_rocks(sleep: bool, name: str = "four_wheeler", n: int = 16,
     rocks' displacements at the end (n, rocks) and, per step, whether any rock has moved
     sideways by more than 10 µm yet (steps, n): the robot has touched one."""
     arena = dataclasses.replace(ArenaParams.cluttered(), sleep=sleep)
-    core = ReachCore(robot(name), arena=arena, num_envs=n, seed=5)
+    core = TaskCore(robot(name), arena=arena, num_envs=n, seed=5)
     core.reset()
     xy = core.rock_qpos[:, None] + np.arange(2)
     core.qpos[:, xy] += (np.array([1.0, 0.0]) - core.target[:, :2])[:, None, :]
@@ -366,8 +366,8 @@ def test_sleeping_rocks_change_what_the_robot_meets_within_tolerance() -> None:
 
 
 def test_settled_rocks_sleep_and_leave_only_the_robots_contacts() -> None:
-    core = ReachCore(robot(), arena=ArenaParams.cluttered(), num_envs=8, seed=0)
-    clean = ReachCore(robot(), num_envs=8, seed=0)
+    core = TaskCore(robot(), arena=ArenaParams.cluttered(), num_envs=8, seed=0)
+    clean = TaskCore(robot(), num_envs=8, seed=0)
     core.reset()
     clean.reset()
     for _ in range(10):

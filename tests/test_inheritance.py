@@ -26,7 +26,8 @@ from evo.components.executors import LocalExecutor, SerialExecutor
 from evo.components.ga import BudgetSchedule, Evolve, GAConfig
 from evo.components.inheritance import actuator_origins, policy_start
 from evo.early_rejection import EarlyRejection
-from evo.envs.params import EnvConfig, TaskParams, observation_origins, observation_size
+from evo.envs.params import EnvConfig, observation_origins, observation_size
+from evo.envs.tasks.reach import Reach
 from evo.evaluation import Job, Outcome, evaluate
 from evo.evolution import Evolution
 from evo.learners.common import (
@@ -81,7 +82,7 @@ def trained_looking(obs: int, act: int, seed: int) -> Policy:
 
 
 def sizes(robot: Robot) -> tuple[int, int]:
-    return observation_size(robot, TaskParams()), robot.n_actuators
+    return observation_size(robot, Reach()), robot.n_actuators
 
 
 # ---- the networks -----------------------------------------------------------------------
@@ -335,7 +336,7 @@ def test_bad_inheritance_settings_are_named() -> None:
 # ---- real training: the worker reads the parent's checkpoint; resume --------------------
 
 TINY = PPO(num_envs=4, rollout_steps=32, epochs=1, minibatch_size=64, hidden=(16, 16))
-SHORT = EnvConfig(task=TaskParams(t_max=40))
+SHORT = EnvConfig(task=Reach(t_max=40))
 
 
 MAIN_TINY = [*EVOLUTION_TINY, "ga.inheritance=parent",

@@ -12,7 +12,8 @@ import torch
 
 from evo.components.inheritance import policy_start
 from evo.edge import compose_config, typed_config
-from evo.envs.params import EnvConfig, TaskParams, observation_size
+from evo.envs.params import EnvConfig, observation_size
+from evo.envs.tasks.reach import Reach
 from evo.learners.common import (
     Inheritance,
     LearnerConfig,
@@ -28,11 +29,11 @@ from evo.robot.builder import PhysicsParams
 from evo.robot.operators import surviving_origins
 
 FOUR_WHEELER = load_robot("robots/four_wheeler.json")
-OBS = observation_size(FOUR_WHEELER, TaskParams())
+OBS = observation_size(FOUR_WHEELER, Reach())
 PHYSICS = PhysicsParams()
 # A shorter task than the paper's (nearer targets, 200-step episodes) so that learning
 # shows within a test-sized budget; the full task is exercised by bench/train_throughput.py.
-NEAR = EnvConfig(task=TaskParams(t_max=200, target_min=0.3, target_max=0.6))
+NEAR = EnvConfig(task=Reach(t_max=200, target_min=0.3, target_max=0.6))
 BUDGET = 60_000  # env steps: three seeds tried all reach 100% deterministic success
 SMALL = PPO(num_envs=16, rollout_steps=64, epochs=10, minibatch_size=512)
 

@@ -21,7 +21,8 @@ from tensordict import TensorDict
 
 from analysis.noise_sweep import trials_table
 from evo.edge import CONF_DIR, compose_config
-from evo.envs.params import EnvConfig, TaskParams
+from evo.envs.params import EnvConfig
+from evo.envs.tasks.reach import Reach
 from evo.learners.common import LearnerConfig, make_policy
 from evo.learners.ppo import RewardScale
 from evo.learners.ppo import train as train_ppo
@@ -41,7 +42,7 @@ def sweeper() -> None:
 
 def test_new_options_keep_the_seeds_curve_and_change_it() -> None:
     robot = load_robot(REPO / "robots" / "four_wheeler.json")
-    env = EnvConfig(task=TaskParams(t_max=40, frame_skip=5))
+    env = EnvConfig(task=Reach(t_max=40, frame_skip=5))
     physics = PhysicsParams(timestep=0.01)
     on = LearnerConfig(num_envs=4, rollout_steps=32, minibatch_size=64, hidden=(16, 16),
                        policy_out_gain=0.0, reward_scaling=True)

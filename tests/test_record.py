@@ -18,8 +18,8 @@ from mcap_protobuf.decoder import DecoderFactory
 from evo.config import typed
 from evo.edge import compose_config
 from evo.envs.arena import ArenaParams
-from evo.envs.params import TaskParams
 from evo.envs.scene import build_scene
+from evo.envs.tasks.reach import Reach
 from evo.record import (
     Episode,
     EpisodeChoice,
@@ -47,7 +47,7 @@ def scene(n_rocks: int = 3) -> mujoco.MjModel:
     """The four-wheeler in an arena with ``n_rocks`` rocks and the target marker."""
     robot = load_robot("robots/four_wheeler.json")
     arena = ArenaParams(n_rocks=n_rocks)
-    return build_scene(robot, PhysicsParams(), arena, TaskParams()).compile()
+    return build_scene(robot, PhysicsParams(), arena, Reach()).compile()
 
 
 def simulate(model: mujoco.MjModel, frames: int, index: int = 0, seed: int = 0) -> Episode:

@@ -19,7 +19,8 @@ import evo.envs  # noqa: F401 - registers evo/Reach-v0
 from analysis.ablation.report import main as report_main
 from analysis.early_slope.report import main as early_slope_main
 from analysis.load import load_runs
-from evo.envs.params import TaskParams, observation_size
+from evo.envs.params import observation_size
+from evo.envs.tasks.reach import Reach
 from evo.learners.common import load_checkpoint
 from evo.replay import main as replay_main
 from evo.robot import load_robot
@@ -92,7 +93,7 @@ def test_a_checkpoint_stores_its_robot_and_sizes(run_dir: Path) -> None:
     robot = load_robot(run_dir / "robots" / f"{name}.json")
     state = torch.load(run_dir / "evals" / f"{name}.pt", weights_only=True)
     assert state["robot"] == robot.hash
-    obs_size = observation_size(robot, TaskParams())
+    obs_size = observation_size(robot, Reach())
     assert (state["obs_size"], state["action_size"]) == (obs_size, robot.n_actuators)
     load_checkpoint(run_dir / "evals" / f"{name}.pt", robot=robot, obs_size=obs_size)
 
@@ -155,7 +156,7 @@ def test_a_half_written_or_running_run_is_not_called_complete(
 
 def test_the_gymnasium_env_refuses_a_wrong_action_and_steps_out_of_order() -> None:
     env = gym.make("evo/Reach-v0", robot="robots/four_wheeler.json",
-                   task=TaskParams(t_max=3)).unwrapped
+                   task=Reach(t_max=3)).unwrapped
     with pytest.raises(gym.error.ResetNeeded, match="reset"):
         env.step(np.zeros(3, dtype=np.float32))
     env.reset(seed=0)

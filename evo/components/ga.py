@@ -27,9 +27,8 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from evo.checks import at_least, positive, within
+from evo.checks import SWAPPABLE, at_least, positive, within
 from evo.components.inheritance import INHERITANCE_MODES
-from evo.config import SWAPPABLE
 from evo.early_rejection import EarlyRejection
 from evo.robot.operators import (
     MUTATIONS,

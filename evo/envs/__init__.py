@@ -1,13 +1,23 @@
-"""Simulation environments: the reach-the-target task (SPEC section 3).
+"""Simulation environments: the tasks over a batch of arenas (SPEC sections 3 and 3b).
 
-Importing this package registers the gymnasium id ``evo/Reach-v0``
-(``evo.envs.gym_env.ReachGymEnv``). The batched TorchRL env is
-``evo.envs.reach.ReachEnv``; both run the task code of ``evo.envs.task``.
+Importing this package registers a gymnasium id per task (``evo.envs.gym_env.TaskGymEnv``):
+``evo/Reach-v0`` (the paper's task) and ``evo/Locomotion-v0`` (in the open arena). The
+batched TorchRL env is ``evo.envs.torchrl_env.TaskEnv``; both run the batched core of
+``evo.envs.core`` under a task of ``evo.envs.tasks``.
 """
 
 import gymnasium
 
+from evo.envs.tasks.locomotion import Locomotion
+
 ENV_ID = "evo/Reach-v0"
 
-if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point="evo.envs.gym_env:ReachGymEnv")
+TASK_IDS: dict[str, dict[str, object]] = {
+    ENV_ID: {},
+    "evo/Locomotion-v0": {"task": Locomotion(), "arena": "open"},
+}
+"""Each task's gymnasium id and the keyword arguments it starts from."""
+
+for _id, _kwargs in TASK_IDS.items():
+    if _id not in gymnasium.registry:
+        gymnasium.register(id=_id, entry_point="evo.envs.gym_env:TaskGymEnv", kwargs=_kwargs)

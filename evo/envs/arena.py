@@ -1,4 +1,4 @@
-"""Arenas of the reach task (SPEC section 3): floor, walls, movable rocks and a target.
+"""Arenas of the tasks (SPEC sections 3, 3b): floor, walls, movable rocks and a marker.
 
 An arena is a square of side ``side`` with walls, the robot starting at its centre.
 ``clean`` is floor + walls; ``cluttered`` also has ``n_rocks`` movable rocks of five fixed
@@ -128,6 +128,11 @@ class ArenaParams:
     def cluttered(cls) -> ArenaParams:
         """Floor, walls and 40 rocks around the target; settled rocks sleep."""
         return cls(n_rocks=40, sleep=True)
+
+    @classmethod
+    def open(cls) -> ArenaParams:
+        """Floor and walls 30 m apart: room to travel (``conf/env/task/locomotion.yaml``)."""
+        return cls(side=30.0)
 
     @property
     def free_area(self) -> float:

@@ -1,11 +1,12 @@
-"""``ReachGymEnv``: the reach task as a single-arena ``gymnasium.Env`` (``evo/Reach-v0``).
+"""``TaskGymEnv``: a task as a single-arena ``gymnasium.Env`` (``evo/Reach-v0``,
+``evo/Locomotion-v0``).
 
 For users of gymnasium-based libraries (Stable-Baselines3, CleanRL, ...). It runs the
-same task code as the batched TorchRL ``ReachEnv`` (``evo.envs.task.ReachCore`` with one
+same task code as the batched TorchRL ``TaskEnv`` (``evo.envs.core.TaskCore`` with one
 arena), so observations, rewards and termination are identical::
 
     import gymnasium as gym
-    import evo.envs  # registers evo/Reach-v0
+    import evo.envs  # registers evo/Reach-v0 and the other tasks' ids
 
     env = gym.make("evo/Reach-v0", robot="robots/four_wheeler.json", arena="cluttered")
 
@@ -25,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from evo.envs.arena import ArenaParams
-from evo.envs.params import TaskParams
-from evo.envs.task import ReachCore
+from evo.envs.core import TaskCore
+from evo.envs.tasks.base import Task
 from evo.robot.builder import PhysicsParams
 from evo.robot.io import load_robot
 from evo.robot.tree import Robot
@@ -35,23 +36,24 @@ Obs = npt.NDArray[np.float32]
 
 
 def arena_params(arena: str | ArenaParams) -> ArenaParams:
-    """``ArenaParams`` from a preset name (``clean``, ``cluttered``) or as given."""
+    """``ArenaParams`` from a preset name (``clean``, ``cluttered``, ``open``) or as given."""
     if isinstance(arena, ArenaParams):
         return arena
-    presets = {"clean": ArenaParams.clean, "cluttered": ArenaParams.cluttered}
+    presets = {"clean": ArenaParams.clean, "cluttered": ArenaParams.cluttered,
+               "open": ArenaParams.open}
     if arena not in presets:
         raise ValueError(f"arena must be one of {sorted(presets)} or ArenaParams, got {arena!r}")
     return presets[arena]()
 
 
-class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
-    """One arena of the reach task.
+class TaskGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
+    """One arena of a task.
 
     Args:
         robot: A robot, or the path of an ``evo.robot/1`` file.
-        arena: ``"clean"``, ``"cluttered"`` or ``ArenaParams``.
+        arena: ``"clean"``, ``"cluttered"``, ``"open"`` or ``ArenaParams``.
         physics: Module constants (defaults when None).
-        task: Task constants (defaults when None).
+        task: The task and its settings (reach when None).
         render_mode: ``"rgb_array"`` for pictures from ``render()``.
     """
 
@@ -62,14 +64,14 @@ class ReachGymEnv(gym.Env[Obs, Obs]):  # type: ignore[misc]
         robot: Robot | str | os.PathLike[str],
         arena: str | ArenaParams = "clean",
         physics: PhysicsParams | None = None,
-        task: TaskParams | None = None,
+        task: Task | None = None,
         render_mode: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r}")
         if not isinstance(robot, Robot):
             robot = load_robot(robot)
-        self.core = ReachCore(robot, physics, arena_params(arena), task, num_envs=1)
+        self.core = TaskCore(robot, physics, arena_params(arena), task, num_envs=1)
         size = self.core.obs_size
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.core.action_size,), np.float32)

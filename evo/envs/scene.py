@@ -1,9 +1,10 @@
-"""The scene of one arena as MJCF: the robot at the centre, walls, rocks and the target
-marker (``conf/env/*.yaml``), with MuJoCo's sleeping islands when the arena asks.
+"""The scene of one arena as MJCF: the robot at the centre, walls, rocks, the task's
+marker and whatever else the task adds (``conf/env/*.yaml``), with MuJoCo's sleeping
+islands when the arena asks.
 
 An evaluation compiles its scene once (:func:`compile_scene`) and hands the
 :class:`Scene` to all that simulate or draw it: its recorders, the learner's arenas
-(``evo.envs.task.ReachCore``) and the recorded deterministic episode
+(``evo.envs.core.TaskCore``) and the recorded deterministic episode
 (``evo.learners.rollouts.play``). Nothing writes to the compiled model; each user makes
 its own ``MjData``.
 """
@@ -16,16 +17,18 @@ from dataclasses import dataclass
 import mujoco
 
 from evo.envs.arena import ArenaParams, arena_scene
-from evo.envs.params import TaskParams
+from evo.envs.tasks.base import Task
 from evo.robot.builder import BuiltRobot, PhysicsParams, build
 from evo.robot.tree import Robot
 
 
 def build_scene(
-    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
+    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: Task
 ) -> BuiltRobot:
-    """The robot in its arena as MJCF (robot at the centre, rocks and target marker)."""
-    world = arena_scene(arena, task.success_radius)
+    """The robot in its arena as MJCF (robot at the centre, rocks, the task's marker and
+    objects)."""
+    world = arena_scene(arena, task.marker_radius)
+    task.scene(world, arena)
 
     def scene(root: ET.Element) -> None:
         body = root.find("worldbody")
@@ -52,18 +55,18 @@ class Scene:
     robot: Robot
     physics: PhysicsParams
     arena: ArenaParams
-    task: TaskParams
+    task: Task
     built: BuiltRobot
     model: mujoco.MjModel
 
     def of(self, robot: Robot, physics: PhysicsParams, arena: ArenaParams,
-           task: TaskParams) -> bool:
+           task: Task) -> bool:
         """Whether this is the scene of ``robot`` under these settings."""
         return (self.robot, self.physics, self.arena, self.task) == (robot, physics, arena, task)
 
 
 def compile_scene(
-    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: TaskParams
+    robot: Robot, physics: PhysicsParams, arena: ArenaParams, task: Task
 ) -> Scene:
     """:func:`build_scene` and its compiled model."""
     built = build_scene(robot, physics, arena, task)

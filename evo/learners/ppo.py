@@ -1,4 +1,4 @@
-"""PPO on the batched ``ReachEnv`` through TorchRL: collector, GAE and ``ClipPPOLoss``.
+"""PPO on the batched ``TaskEnv`` through TorchRL: collector, GAE and ``ClipPPOLoss``.
 
 ``train`` reads top to bottom: build the env and networks, then for every collector
 batch compute advantages, run ``epochs`` passes of minibatch updates, fold the batch
@@ -43,9 +43,9 @@ from torchrl.collectors import Collector
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
 
-from evo.envs.params import REWARD_TERMS, EnvConfig
-from evo.envs.reach import ReachEnv, make_env
+from evo.envs.params import EnvConfig
 from evo.envs.scene import Scene, compile_scene
+from evo.envs.torchrl_env import TaskEnv, make_env
 from evo.learners import CurveHook, EpisodeHook, Learner
 from evo.learners.common import (
     Inheritance,
@@ -216,12 +216,12 @@ class RewardScale:
         batch.set(("next", "reward"), reward / torch.sqrt(self.stats.var + 1e-8))
 
 
-def _batch_row(batch: TensorDictBase, steps: int,
-               episodes: dict[str, torch.Tensor]) -> dict[str, float]:
-    """The curve row's env-step count, episode statistics, reward terms and the policy's
-    spread and mean actions of a batch."""
+def _batch_row(batch: TensorDictBase, steps: int, episodes: dict[str, torch.Tensor],
+               terms: tuple[str, ...]) -> dict[str, float]:
+    """The curve row's env-step count, episode statistics, reward terms (the task's
+    ``terms``) and the policy's spread and mean actions of a batch."""
     row = {"env_steps": float(steps), **_episode_stats(episodes)}
-    for term in REWARD_TERMS:
+    for term in terms:
         row[f"train/reward/{term}"] = float(batch["next", "reward_terms", term].mean())
     row["train/action_std"] = float(batch["scale"].mean())
     row["train/mean_outside"] = float((batch["loc"].abs() > 1).float().mean())
@@ -316,7 +316,7 @@ def _train(
             episodes = _completed(batch)
             returns_sum += float(episodes["return"].sum())
             returns_count += int(episodes["return"].numel())
-            row = _batch_row(batch, steps, episodes)
+            row = _batch_row(batch, steps, episodes, env.core.task.reward_terms)
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
@@ -347,7 +347,7 @@ def _train(
 def _setup(robot: Robot, physics: PhysicsParams, env_config: EnvConfig, config: LearnerConfig,
            seed: int, scene: Scene | None, on_episode: EpisodeHook | None,
            inheritance: Inheritance | None
-           ) -> tuple[ReachEnv, Policy, PeriodicEvaluation | None]:
+           ) -> tuple[TaskEnv, Policy, PeriodicEvaluation | None]:
     """The training's arenas (watched by ``on_episode``), its fresh policy, sized by the
     env's specs (a parent's, slot-mapped, with ``inheritance``), and its periodic
     evaluations (``eval_interval``; the scene compiled once for both)."""

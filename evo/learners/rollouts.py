@@ -17,10 +17,10 @@ from typing import TypedDict
 
 import torch
 
+from evo.envs.core import TaskCore
 from evo.envs.params import EnvConfig
-from evo.envs.reach import make_env
 from evo.envs.scene import Scene
-from evo.envs.task import ReachCore
+from evo.envs.torchrl_env import make_env
 from evo.episode import Episode
 from evo.learners.common import Policy
 from evo.robot.builder import PhysicsParams
@@ -36,14 +36,14 @@ def play(
     seed: int,
     episodes: int = 1,
     scene: Scene | None = None,
-) -> tuple[ReachCore, list[Episode]]:
+) -> tuple[TaskCore, list[Episode]]:
     """Run ``episodes`` deterministic episodes one after another in one arena
     (``scene``: the robot's compiled arena, when the caller has it).
 
     Returns:
         The arena (its ``model`` describes the bodies) and the episodes.
     """
-    core = ReachCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed,
+    core = TaskCore(robot, physics, env.arena, env.task, num_envs=1, nthread=1, seed=seed,
                      scene=scene)
     played: list[Episode] = []
     core.watch(played.append)

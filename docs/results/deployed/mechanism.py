@@ -24,8 +24,8 @@ import torch
 from omegaconf import OmegaConf
 
 from evo.config import typed
+from evo.envs.core import TaskCore
 from evo.envs.params import EnvConfig
-from evo.envs.task import ReachCore
 from evo.learners.common import Policy, load_checkpoint
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -41,7 +41,7 @@ def episodes(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConfi
              count: int, seed: int, noisy: bool) -> dict[str, float]:
     """``count`` episodes side by side, one per arena, with the mean action or the
     policy's noise (drawn from ``seed``); their summary."""
-    core = ReachCore(robot, physics, env.arena, env.task, count, 1, seed)
+    core = TaskCore(robot, physics, env.arena, env.task, count, 1, seed)
     obs = core.reset()
     active = np.ones(count, dtype=bool)
     success = np.zeros(count, dtype=bool)

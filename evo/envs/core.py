@@ -1,43 +1,40 @@
-"""The reach-the-target task over a batch of arenas, in numpy (SPEC section 3).
+"""The batched core every task runs on: a batch of arenas of one robot, in numpy.
 
-``ReachCore`` is the one implementation of the task: the TorchRL ``ReachEnv`` and the
-gymnasium ``ReachGymEnv`` are thin faces over it. All ``N`` arenas hold the same robot
-and advance together: one call of a persistent ``mujoco.batch.Batch`` (one ``MjData``
-per arena, kept between calls) steps every arena ``frame_skip`` physics steps in C on
-``nthread`` threads, then observations and rewards are computed for all arenas at once
-with numpy. Every control step starts the constraint solver cold (zero warm start), as
-a stateless rollout from the saved physics state would; the arenas' data persist so
-that resting rocks can sleep (``ArenaParams.sleep``). The task's configuration and
-sizes are ``evo.envs.params``, the scene's MJCF ``evo.envs.scene``.
+``TaskCore`` holds ``N`` arenas of the same robot that advance together: one call of a
+persistent ``mujoco.batch.Batch`` (one ``MjData`` per arena, kept between calls) steps
+every arena ``frame_skip`` physics steps in C on ``nthread`` threads, then the task's
+rules (``evo.envs.tasks``) compute observations, rewards, success and termination for
+all arenas at once with numpy. The TorchRL ``TaskEnv`` and the gymnasium
+``TaskGymEnv`` are thin faces over it. Every control step starts the constraint solver
+cold (zero warm start), as a stateless rollout from the saved physics state would; the
+arenas' data persist so that resting rocks can sleep (``ArenaParams.sleep``). The
+observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
+``evo.envs.scene``.
 
-Observation (``9 + 2(m + n)`` values, ``+3`` with ``observe_up``), in this order:
+Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
+``observe_up``), in this order:
 
-====================  ====  ===========================================================
-brain linear velocity  3    m/s, in the brain frame
-brain angular velocity 3    rad/s, in the brain frame
-direction to target    2    unit vector in the brain's horizontal frame (x = heading)
-distance to target     1    m, closest horizontal distance of any module (the task's d)
-per motor              2    wheel speed / motor_max_speed, last command (both in [-1, 1])
-per pivot              2    hinge angle / pivot_range, last command (both in [-1, 1])
-gravity (observe_up)   3    unit vector of gravity in the brain frame
-====================  ====  ===========================================================
+======================  ====  =========================================================
+brain linear velocity    3    m/s, in the brain frame
+brain angular velocity   3    rad/s, in the brain frame
+the task's values        3    reach: direction to the target (2), distance to it (1)
+per motor                2    wheel speed / motor_max_speed, last command (both in [-1, 1])
+per pivot                2    hinge angle / pivot_range, last command (both in [-1, 1])
+the task's extra values  k    ``Task.extra_slots`` (none for reach)
+gravity (observe_up)     3    unit vector of gravity in the brain frame
+======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
 ``Robot.actuator_paths``); ``evo.envs.params`` names the layout's parts (``GLOBAL_SLOTS``,
 ``ACTUATOR_SLOTS``, ``UP_SLOTS``) and maps it between two bodies (``observation_origins``).
 
-Reward per control step, as named terms (their sum is the reward):
-
-* ``time``: ``-1 / t_max``;
-* ``approach``: ``((d_prev - d) / L) * (1 - d / L)``, positive when the robot gets closer
-  (the sign of the paper's Eq. 10 is reversed there; SPEC decision);
-* ``success``: ``+1`` on the step where ``d < success_radius``, which also terminates.
-
-An episode is truncated after ``t_max`` control steps. A numerical blow-up (non-finite
-state, MuJoCo resetting the arena after a bad acceleration, which shows as time jumping
-back, or the robot thrown: a module above ``task.max_height`` or beyond the walls) ends
-only that arena's episode: it is truncated, flagged ``unstable``, its observation is
-held at the last good one and its step earns only the time penalty.
+The reward of a step is the sum of the task's named terms (``Task.reward_terms``). An
+episode ends when the task terminates it or is truncated after ``t_max`` control steps.
+A numerical blow-up (non-finite state, MuJoCo resetting the arena after a bad
+acceleration, which shows as time jumping back, or the robot thrown: a module above
+``task.max_height`` or beyond the walls) ends only that arena's episode: it is
+truncated, flagged ``unstable``, its observation is held at the last good one and its
+step earns no task term but those the task pays regardless (reach's time penalty).
 """
 
 from __future__ import annotations
@@ -52,9 +49,11 @@ import mujoco.batch
 import numpy as np
 import numpy.typing as npt
 
-from evo.envs.arena import ArenaParams, sample_target, scatter_rocks
-from evo.envs.params import REWARD_TERMS, TaskParams, observation_size
+from evo.envs.arena import ArenaParams, scatter_rocks
+from evo.envs.params import observation_size
 from evo.envs.scene import Scene, compile_scene
+from evo.envs.tasks.base import Task
+from evo.envs.tasks.reach import Reach
 from evo.episode import Episode
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
@@ -79,7 +78,7 @@ class Step:
 class _Tracer:
     """Frames of the watched arena's running episode; ``count`` episodes ended so far."""
 
-    def __init__(self, core: ReachCore, callback: Callable[[Episode], None]) -> None:
+    def __init__(self, core: TaskCore, callback: Callable[[Episode], None]) -> None:
         self.core, self.callback = core, callback
         self.frames: list[tuple[float, F64, F64, F64, dict[str, float]]] = []
         self.count = 0
@@ -103,7 +102,7 @@ class _Tracer:
                 xpos=np.stack(xpos),
                 xquat=np.stack(xquat),
                 target=self.core.target[0].copy(),
-                rewards={k: np.array([t[k] for t in terms]) for k in REWARD_TERMS},
+                rewards={k: np.array([t[k] for t in terms]) for k in self.core.task.reward_terms},
                 success=success,
                 qpos=np.stack(qpos),
                 unstable=unstable,
@@ -111,17 +110,17 @@ class _Tracer:
         )
 
 
-class ReachCore:
-    """``num_envs`` arenas of one robot, stepped together.
+class TaskCore:
+    """``num_envs`` arenas of one robot, stepped together under one task.
 
     Args:
         robot: The robot structure.
         physics: Module constants.
         arena: The arena (clean or cluttered).
-        task: Task constants.
+        task: The task (reach when None).
         num_envs: Number of arenas N.
         nthread: Threads MuJoCo's rollout uses for the N arenas.
-        seed: Seed of the arenas' random targets and rocks.
+        seed: Seed of the arenas' random episodes (the task's draws and the rocks).
         scene: The scene of ``robot`` under these settings, compiled by the caller (an
             evaluation compiles it once for all its users); compiled here when None.
     """
@@ -131,7 +130,7 @@ class ReachCore:
         robot: Robot,
         physics: PhysicsParams | None = None,
         arena: ArenaParams | None = None,
-        task: TaskParams | None = None,
+        task: Task | None = None,
         num_envs: int = 1,
         nthread: int = 1,
         seed: int | None = None,
@@ -142,7 +141,7 @@ class ReachCore:
         self.robot = robot
         self.physics = physics or PhysicsParams()
         self.arena = arena or ArenaParams()
-        self.task = task or TaskParams()
+        self.task: Task = task or Reach()
         if scene is None:
             scene = compile_scene(robot, self.physics, self.arena, self.task)
         elif not scene.of(robot, self.physics, self.arena, self.task):
@@ -152,6 +151,7 @@ class ReachCore:
         self.rng = np.random.default_rng(seed)
         self._index_model()
         self._allocate()
+        self.rules = self.task.rules(self)
         self.unstable_count = 0
         self.warning_count = 0
         self.physics_seconds = 0.0
@@ -201,7 +201,6 @@ class ReachCore:
         self.sensordata = np.zeros((n, m.nsensordata))
         self.target = np.zeros((n, 3))
         self.action = np.zeros((n, m.nu))
-        self.distance = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
         self.returns = np.zeros(n)
         self.observation = np.zeros((n, self.obs_size), dtype=np.float32)
@@ -252,8 +251,8 @@ class ReachCore:
         if len(chosen):  # a fresh MjData for each: awake, no history
             self.batch.reset(chosen, stage=mujoco.mjtStage.mjSTAGE_NONE)
         for i in chosen:
-            target = sample_target(self.rng, self.task.target_min, self.task.target_max)
             mujoco.mj_resetData(m, d)
+            target = self.rules.draw(int(i), self.rng, d)
             if self.arena.n_rocks:
                 pos, quat = scatter_rocks(self.arena, target, self.rng)
                 d.qpos[self.rock_qpos[:, None] + np.arange(3)] = pos
@@ -268,24 +267,23 @@ class ReachCore:
         self.action[chosen] = 0.0
         self.steps[chosen] = 0
         self.returns[chosen] = 0.0
-        observation, distance = self._observe()
-        self.observation[chosen] = observation[chosen]
-        self.distance[chosen] = distance[chosen]
+        self.rules.start(chosen)
+        self.observation[chosen] = self._observe()[chosen]
         if self._tracer is not None and (mask is None or mask[0]):
             self._tracer.frames = []
-            self._tracer.frame(dict.fromkeys(REWARD_TERMS, 0.0))
+            self._tracer.frame(dict.fromkeys(self.task.reward_terms, 0.0))
         return self.observation.copy()
 
     def set_target(self, arena: int, position: npt.ArrayLike) -> npt.NDArray[np.float32]:
-        """Move ``arena``'s target (x, y in m) for the rest of its episode (rocks stay).
+        """Move ``arena``'s marker (reach's target; x, y in m) for the rest of its
+        episode (rocks stay); the task measures that arena's progress afresh from here.
 
         Returns:
             The observation of every arena.
         """
         self.target[arena, :2] = np.asarray(position, dtype=np.float64)[:2]
-        observation, distance = self._observe()
-        self.observation[arena] = observation[arena]
-        self.distance[arena] = distance[arena]
+        self.rules.start(np.array([arena], dtype=np.intp))
+        self.observation[arena] = self._observe()[arena]
         return self.observation.copy()
 
     def step(self, action: npt.ArrayLike) -> Step:
@@ -301,33 +299,28 @@ class ReachCore:
         act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
         unstable = self._simulate(act)
         self.action[:] = act
-        observation, distance = self._observe()
+        observation = self._observe()
         stable = ~unstable
         self.observation[stable] = observation[stable]
-        L = self.arena.side
-        approach = np.where(stable, (self.distance - distance) / L * (1 - distance / L), 0.0)
-        success = stable & (distance < self.task.success_radius)
-        self.distance = np.where(stable, distance, self.distance)
-        terms = {
-            "time": np.full(self.num_envs, -1.0 / self.task.t_max),
-            "approach": approach,
-            "success": success.astype(np.float64),
-        }
-        reward = terms["time"] + terms["approach"] + terms["success"]
+        terms, success, terminated = self.rules.step(stable, self.steps + 1 >= self.task.t_max)
+        first, *rest = self.task.reward_terms
+        reward = np.array(terms[first], dtype=np.float64)
+        for name in rest:  # summed in the task's order
+            reward = reward + terms[name]
         self.steps += 1
         self.steps_taken += self.num_envs
         self.returns += reward
         self.unstable_count += int(unstable.sum())
         truncated = unstable | (self.steps >= self.task.t_max)
         if self._tracer is not None and self._tracer.frames:
-            self._tracer.frame({name: float(terms[name][0]) for name in REWARD_TERMS})
-            if success[0] or truncated[0]:
+            self._tracer.frame({name: float(terms[name][0]) for name in self.task.reward_terms})
+            if terminated[0] or truncated[0]:
                 self._tracer.finish(bool(success[0]), bool(unstable[0]))
         return Step(
             observation=self.observation.copy(),
             reward=reward,
             terms=terms,
-            terminated=success,
+            terminated=terminated,
             truncated=truncated,
             success=success,
             unstable=unstable,
@@ -364,12 +357,12 @@ class ReachCore:
         ``task.max_height`` or beyond the walls' centre lines. Driving does not get
         there (the walls stand twice a module's height); a contact blow-up that stays
         finite does, and outside the arena the approach term would pay for the distance."""
-        modules = self._module_positions()
+        modules = self.module_positions()
         outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
         high = (modules[:, :, 2] > self.task.max_height).any(axis=1)
         return np.asarray(outside | high, dtype=np.bool_)
 
-    def _module_positions(self) -> F64:
+    def module_positions(self) -> F64:
         """World position of every module in every arena, (N, modules, 3), from the
         current sensors."""
         modules: F64 = self.sensordata[:, self.i_modules].reshape(
@@ -393,24 +386,32 @@ class ReachCore:
         self.warning_count += max(0, seen - self.warnings_seen)
         self.warnings_seen = seen
 
-    def _observe(self) -> tuple[npt.NDArray[np.float32], F64]:
-        """Observation and task distance d of every arena from the current sensors."""
-        s, n = self.sensordata, self.num_envs
-        modules = self._module_positions()
-        gap = self.target[:, None, :2] - modules[:, :, :2]
-        distance = np.sqrt((gap**2).sum(axis=2)).min(axis=1)
-        to_target = self.target[:, :2] - s[:, self.i_origin][:, :2]
-        to_target /= np.maximum(np.linalg.norm(to_target, axis=1, keepdims=True), 1e-9)
-        heading = s[:, self.i_xaxis][:, :2]
+    def in_brain_frame(self, vectors: F64) -> F64:
+        """Horizontal world vectors (N, 2) of every arena in its brain's horizontal frame
+        (x = the brain's heading, y = its left)."""
+        heading = self.sensordata[:, self.i_xaxis][:, :2]
         norm = np.linalg.norm(heading, axis=1, keepdims=True)
         heading = np.where(norm > 1e-6, heading / np.maximum(norm, 1e-12), [1.0, 0.0])
-        direction = np.stack(
+        return np.stack(
             [
-                (heading * to_target).sum(axis=1),
-                heading[:, 0] * to_target[:, 1] - heading[:, 1] * to_target[:, 0],
+                (heading * vectors).sum(axis=1),
+                heading[:, 0] * vectors[:, 1] - heading[:, 1] * vectors[:, 0],
             ],
             axis=1,
         )
+
+    def direction_to(self, points: F64) -> F64:
+        """The unit direction from every arena's brain to its point of ``points`` (N, 2+),
+        in the brain's horizontal frame."""
+        towards = points[:, :2] - self.sensordata[:, self.i_origin][:, :2]
+        towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
+        return self.in_brain_frame(towards)
+
+    def _observe(self) -> npt.NDArray[np.float32]:
+        """The observation of every arena from the current sensors (and the task's
+        measures, which its rules keep)."""
+        s, n = self.sensordata, self.num_envs
+        task_values, extra = self.rules.observe()
         n_motors = len(self.i_speed)
         motors = np.stack(
             [s[:, self.i_speed] / self.physics.motor_max_speed, self.action[:, :n_motors]], axis=2
@@ -418,19 +419,12 @@ class ReachCore:
         pivots = np.stack(
             [s[:, self.i_angle] / self.pivot_limit, self.action[:, n_motors:]], axis=2
         ).reshape(n, -1)
-        parts = [
-            s[:, self.i_linvel],
-            s[:, self.i_angvel],
-            direction,
-            distance[:, None],
-            motors,
-            pivots,
-        ]
+        parts = [s[:, self.i_linvel], s[:, self.i_angvel], task_values, motors, pivots, extra]
         if self.task.observe_up:
             x, z = s[:, self.i_xaxis], s[:, self.i_zaxis]
             y = np.cross(z, x)
             parts.append(-np.stack([x[:, 2], y[:, 2], z[:, 2]], axis=1))
-        return np.concatenate(parts, axis=1).astype(np.float32), distance
+        return np.concatenate(parts, axis=1).astype(np.float32)
 
     def poses(self, arena: int) -> tuple[F64, F64]:
         """World positions (nbody, 3) and quaternions (nbody, 4; w, x, y, z) of every body

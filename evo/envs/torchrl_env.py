@@ -1,8 +1,8 @@
-"""``ReachEnv``: the reach task as a batched TorchRL environment (the training fast path).
+"""``TaskEnv``: the reach task as a batched TorchRL environment (the training fast path).
 
-One ``ReachEnv`` holds ``num_envs`` arenas of one robot in one process
+One ``TaskEnv`` holds ``num_envs`` arenas of one robot in one process
 (``batch_size=[num_envs]``); the physics of all arenas advances in one
-``mujoco.batch.Batch`` call per control step (see ``evo.envs.task``). Besides
+``mujoco.batch.Batch`` call per control step (see ``evo.envs.core``). Besides
 ``observation``, ``reward`` and the done flags, every step carries
 
 * ``reward_terms/<name>``: each named reward term (they sum to ``reward``);
@@ -24,9 +24,9 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
-from evo.envs.params import REWARD_TERMS, EnvConfig
+from evo.envs.core import TaskCore
+from evo.envs.params import EnvConfig
 from evo.envs.scene import Scene
-from evo.envs.task import ReachCore
 from evo.robot.builder import PhysicsParams
 from evo.robot.tree import Robot
 
@@ -39,7 +39,7 @@ def _column(values: np.ndarray, dtype: torch.dtype = torch.float32) -> torch.Ten
     return torch.as_tensor(values.reshape(-1, 1), dtype=dtype)
 
 
-class ReachEnv(EnvBase):  # type: ignore[misc]
+class TaskEnv(EnvBase):  # type: ignore[misc]
     """The reach task over the arenas of ``core``, one robot in each, as a TorchRL env.
 
     Args:
@@ -47,7 +47,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
             re-seeds its targets and rocks).
     """
 
-    def __init__(self, core: ReachCore) -> None:
+    def __init__(self, core: TaskCore) -> None:
         super().__init__(batch_size=torch.Size([core.num_envs]), device=None)
         self.core = core
         self.step_seconds = 0.0  # wall time inside _step, physics included
@@ -55,7 +55,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
         self.observation_spec = Composite(
             observation=Unbounded((n, self.core.obs_size), dtype=torch.float32),
             reward_terms=Composite(
-                {name: Unbounded((n, 1), dtype=torch.float32) for name in REWARD_TERMS},
+                {name: Unbounded((n, 1), dtype=torch.float32) for name in core.task.reward_terms},
                 shape=(n,),
             ),
             success=_flags(n),
@@ -87,7 +87,7 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
             {
                 "observation": torch.from_numpy(observation),
                 "reward_terms": TensorDict(
-                    {name: zeros.clone() for name in REWARD_TERMS}, batch_size=(n,)
+                    {name: zeros.clone() for name in self.core.task.reward_terms}, batch_size=(n,)
                 ),
                 "success": false.clone(),
                 "unstable": false.clone(),
@@ -131,8 +131,8 @@ class ReachEnv(EnvBase):  # type: ignore[misc]
 def make_env(
     robot: Robot, physics: PhysicsParams, env: EnvConfig, num_envs: int, seed: int | None,
     scene: Scene | None = None,
-) -> ReachEnv:
-    """A ``ReachEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes
+) -> TaskEnv:
+    """A ``TaskEnv`` of ``num_envs`` arenas as ``env`` (one ``conf/env`` file) describes
     (``scene``: its compiled scene, when the caller has one)."""
-    return ReachEnv(ReachCore(robot, physics, env.arena, env.task, num_envs, env.nthread, seed,
+    return TaskEnv(TaskCore(robot, physics, env.arena, env.task, num_envs, env.nthread, seed,
                               scene=scene))

@@ -1,0 +1,152 @@
+"""What every task is: its settings (:class:`Task`) and its rules over a batch of arenas
+(:class:`Rules`), which the batched core (``evo.envs.core.Arenas``) calls.
+
+A task's observation keeps the layout inheritance relies on (``evo.envs.params``): the
+brain's linear and angular velocity (6) and three values of the task's own, two values
+per actuator in action order, then ``extra_slots`` more values of the task's and, with
+``observe_up``, gravity (3). Its reward is a sum of named terms (``reward_terms``), each
+logged as ``train/reward/<term>``.
+
+Writing a task is one module and one YAML file::
+
+    @dataclass(frozen=True, slots=True)
+    class Spin(Task):
+        '''Turn on the spot as fast as possible.'''
+        reward_terms: ClassVar[tuple[str, ...]] = ("spin",)
+
+        def rules(self, core: Core) -> Rules:
+            return SpinRules(self, core)
+
+with ``conf/env/task/spin.yaml`` naming it (``_target_: mypackage.Spin``) and chosen by
+``env/task=spin``; ``docs/tasks.md`` walks through one.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from evo.checks import at_least, positive
+
+if TYPE_CHECKING:
+    import mujoco
+
+    from evo.envs.arena import ArenaParams
+
+F64 = npt.NDArray[np.float64]
+Bools = npt.NDArray[np.bool_]
+
+
+class Arenas(Protocol):
+    """What a task's rules read of the batched core (``evo.envs.core.Arenas``), all
+    arrays over its ``num_envs`` arenas."""
+
+    num_envs: int
+    arena: ArenaParams
+    sensordata: F64
+    target: F64
+    """(N, 3): where each arena's marker stands (what :meth:`Rules.draw` returned)."""
+    steps: npt.NDArray[np.int64]
+    """Control steps of each running episode."""
+
+    def module_positions(self) -> F64:
+        """World position of every module, (N, modules, 3)."""
+        ...
+
+    def in_brain_frame(self, vectors: F64) -> F64:
+        """Horizontal world vectors (N, 2) in each brain's horizontal frame."""
+        ...
+
+    def direction_to(self, points: F64) -> F64:
+        """Unit direction from each brain to its point, in the brain's horizontal frame."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class Task:
+    """What every task sets: the episode's length and control rate, what it adds to
+    the observation, and when the physics threw the robot.
+
+    Attributes:
+        t_max: Control steps per episode before truncation.
+        frame_skip: Physics steps per control step (0.005 s x 10 = 20 Hz control).
+        observe_up: Add gravity's direction in the brain frame to the observation.
+        max_height: A module centre higher than this, m, or beyond the walls' centre
+            lines means the physics threw the robot (a contact blow-up): that arena's
+            episode ends as unstable.
+    """
+
+    t_max: int = 1000
+    frame_skip: int = 10
+    observe_up: bool = False
+    max_height: float = 1.0
+
+    reward_terms: ClassVar[tuple[str, ...]] = ()
+    """The names of the reward's terms, in the order they are summed."""
+    extra_slots: ClassVar[int] = 0
+    """Observation values the task adds after the per-actuator ones (before gravity)."""
+
+    def __post_init__(self) -> None:
+        at_least(self, 1, "t_max", "frame_skip")
+        positive(self, "max_height")
+
+    @property
+    def marker_radius(self) -> float:
+        """Radius of the flat disc that marks the task's point (a target, a heading, a
+        goal) in pictures and replays, m."""
+        return 0.1
+
+    def check_arena(self, arena: ArenaParams) -> None:
+        """Raise ``ValueError`` (naming the key) when ``arena`` cannot hold this task."""
+
+    def scene(self, world: ET.Element, arena: ArenaParams) -> None:
+        """Add the task's own bodies and geoms to the arena's ``<worldbody>`` (the
+        ``target`` marker and the arena's walls and rocks are there already)."""
+
+    def rules(self, core: Arenas) -> Rules:
+        """The task's rules over ``core``'s arenas."""
+        raise NotImplementedError(f"{type(self).__name__}: a task must define rules()")
+
+
+class Rules:
+    """A task played over the ``N`` arenas of one core, all with arrays over arenas.
+
+    The core calls, for the arenas that start an episode, :meth:`draw` for each (then
+    runs MuJoCo's forward pass and reads the sensors), :meth:`start` for them all and
+    :meth:`observe`; at every control step, after the physics, :meth:`observe` then
+    :meth:`step`. ``core.sensordata``, ``core.target`` (the marker of each arena)
+    and ``core.steps`` (control steps of each running episode) are the state it reads.
+
+    Args:
+        task: The task's settings.
+        core: The core whose arenas it plays on.
+    """
+
+    def __init__(self, task: Task, core: Arenas) -> None:
+        self.task, self.core = task, core
+
+    def draw(self, arena: int, rng: np.random.Generator, data: mujoco.MjData) -> F64:
+        """Draw ``arena``'s new episode from ``rng`` into ``data`` (freshly reset, before
+        the forward pass: its objects' ``qpos``) and return where its marker stands,
+        (3,) m. The arena's rocks are scattered around the marker afterwards."""
+        raise NotImplementedError
+
+    def start(self, chosen: npt.NDArray[np.intp]) -> None:
+        """The arenas ``chosen`` begin an episode (or their marker moved): take the
+        current sensors as their starting point."""
+
+    def observe(self) -> tuple[F64, F64]:
+        """The task's observation values of every arena from the current sensors:
+        three after the brain's velocities, (N, 3), and ``extra_slots`` after the
+        actuators', (N, extra_slots). Keeps what :meth:`step` measures."""
+        raise NotImplementedError
+
+    def step(self, stable: Bools, last: Bools) -> tuple[dict[str, F64], Bools, Bools]:
+        """One control step's reward terms (by ``reward_terms``), success and
+        termination of every arena; ``stable``: the arenas whose physics stayed sound
+        (an unstable one earns no task term), ``last``: those at their last step."""
+        raise NotImplementedError
