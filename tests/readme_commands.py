@@ -195,6 +195,8 @@ HOW: dict[str, How] = {
         append=TINY_EVOLUTION, makes_run="ablation",
         group=ANALYSIS),
     # ---- evo
+    "python evo/main.py +exp=train robot=robots/snake.json env/task=locomotion": How(
+        append=f"learner.total_steps=1024 {TINY_TRAINING}", says="deterministic evaluation:"),
     "python evo/main.py +exp=evaluate robot=robots/four_wheeler.json "
     "checkpoint=<run dir>/policy.pt": How(append=TINY_TRAINING,
                                           fill=(("<run dir>", "<train run dir>"),),
