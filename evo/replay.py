@@ -80,7 +80,8 @@ def write_video(
 
     renderer = make_renderer(model, width, height)
     data = mujoco.MjData(model)
-    target_body = model.body("target").mocapid[0]
+    mocap = [(int(model.body_mocapid[b]), b) for b in range(model.nbody)
+             if model.body_mocapid[b] >= 0]  # the target, a task's moving map
     brain = model.body("brain").id
     camera = mujoco.MjvCamera()
     camera.azimuth, camera.elevation = 135.0, -35.0
@@ -93,7 +94,9 @@ def write_video(
                 lookat, distance = tracking_shot(episode.xpos[:, brain], episode.target)
                 for t, qpos in enumerate(episode.qpos):
                     data.qpos[:] = qpos
-                    data.mocap_pos[target_body] = episode.target
+                    for index, body in mocap:  # where each stood in this frame
+                        data.mocap_pos[index] = episode.xpos[t, body]
+                        data.mocap_quat[index] = episode.xquat[t, body]
                     mujoco.mj_kinematics(model, data)
                     camera.lookat[:], camera.distance = lookat[t], distance[t]
                     renderer.update_scene(data, camera=camera)

@@ -93,7 +93,9 @@ def schemas() -> dict[str, dict[str, Any]]:
     from evo.components.ga import GAConfig
     from evo.envs.params import EnvConfig
     from evo.envs.tasks.locomotion import Locomotion
+    from evo.envs.tasks.push import Push
     from evo.envs.tasks.reach import Reach
+    from evo.envs.tasks.rough import Rough
     from evo.learners.ppo import PPO
     from evo.record.config import RecordConfig
     from evo.retrain import RetrainConfig
@@ -109,6 +111,8 @@ def schemas() -> dict[str, dict[str, Any]]:
         "env/clean": defaults_node(EnvConfig, omit=("task",)),
         "env/task/reach": defaults_node(Reach, target=True),
         "env/task/locomotion": defaults_node(Locomotion, target=True),
+        "env/task/push": defaults_node(Push, target=True),
+        "env/task/rough": defaults_node(Rough, target=True),
         "learner/ppo": defaults_node(PPO, target=True),
         # ga.structure is the conf/ga/structure group's choice.
         "ga/steady_state": defaults_node(GAConfig, omit=("structure",)),

@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 import torch
 from gymnasium.utils.env_checker import check_env
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 from torchrl.envs.utils import check_env_specs
 
 import evo.envs
@@ -25,7 +27,12 @@ from evo.envs.arena import ArenaParams
 from evo.envs.core import TaskCore
 from evo.envs.tasks.base import Task
 from evo.envs.tasks.locomotion import Locomotion
+from evo.envs.tasks.push import Push
+from evo.envs.tasks.rough import Rough
 from evo.envs.torchrl_env import TaskEnv
+from evo.episode import Episode
+from evo.record import McapRecorder, Recorders, RerunRecorder
+from evo.record.mcap_file import TOPIC_SCENE
 from evo.record.readback import read_episodes
 from evo.robot import load_robot
 
@@ -34,6 +41,8 @@ ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "COLUMNS":
 
 TASKS: dict[str, tuple[Task, ArenaParams]] = {
     "locomotion": (Locomotion(t_max=60), ArenaParams.open()),
+    "push": (Push(t_max=60), ArenaParams.cluttered()),
+    "rough": (Rough(t_max=60), ArenaParams(wall_height=0.2)),
 }
 """Each new task, short, in its arena."""
 
@@ -92,6 +101,101 @@ def test_a_snake_that_crawls_along_the_heading_succeeds_and_a_still_one_does_not
     assert step.truncated.all() and list(step.success) == [True, False]
     assert returns[0] > 3 * task.success_distance and abs(returns[1]) < 0.02
     assert step.observation[0, 8] == pytest.approx(returns[0], rel=1e-4)
+
+
+STRAIGHT = (1.0, 1.0, 0.0)
+"""The four-wheeler's action that drives it straight ahead (+x) at about 0.37 m/s."""
+
+
+def drive(core: TaskCore, driven: int, steps: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Drive the first ``driven`` arenas' four-wheelers straight ahead and leave the rest
+    still; whether each succeeded and each term's sum until then."""
+    act = np.zeros((core.num_envs, core.action_size))
+    act[:driven] = STRAIGHT
+    done = np.zeros(core.num_envs, dtype=bool)
+    sums = {term: np.zeros(core.num_envs) for term in core.task.reward_terms}
+    for _ in range(steps):
+        step = core.step(act)
+        for term in sums:
+            sums[term] += step.terms[term] * ~done
+        done |= step.terminated | step.truncated
+        if step.success.any():
+            assert (step.terminated == step.success).all()
+    return done & (sums.get("success", 0) > 0), sums
+
+
+OBJECT = {"locomotion": None, "push": "box", "rough": "terrain"}
+"""The body each task adds to the scene."""
+
+
+@pytest.mark.parametrize("name", sorted(TASKS))
+def test_recordings_read_back_with_the_tasks_terms_marker_and_objects(
+        name: str, tmp_path: Path) -> None:
+    from test_record_files import entities  # the rerun CLI's view of an .rrd
+
+    task, arena = TASKS[name]
+    core = TaskCore(load_robot("robots/four_wheeler.json"), arena=arena, task=task,
+                    num_envs=2, seed=3)
+    played: list[Episode] = []
+    core.watch(played.append)
+    core.reset()
+    while not played:
+        core.step(np.tile(STRAIGHT, (2, 1)))
+    mcap, rrd = tmp_path / "e.mcap", tmp_path / "e.rrd"
+    with Recorders([McapRecorder(mcap, core.model, {}), RerunRecorder(rrd, core.model, {})]) as rec:
+        rec.episode(played[0])
+    (back,) = read_episodes(mcap)
+    assert list(back.rewards) == list(task.reward_terms)
+    np.testing.assert_array_equal(back.target, played[0].target)
+    for term in task.reward_terms:
+        np.testing.assert_array_equal(back.rewards[term], played[0].rewards[term])
+    with mcap.open("rb") as f:
+        (message,) = [m for _, _, _, m in make_reader(f, decoder_factories=[DecoderFactory()])
+                      .iter_decoded_messages(topics=[TOPIC_SCENE])]
+    drawn = {e.id: len(e.cubes) + len(e.cylinders) + len(e.spheres) for e in message.entities}
+    assert drawn.get("target", 0) >= 1  # the marker
+    if OBJECT[name]:
+        body = OBJECT[name]
+        assert drawn.get(body, 0) >= (10 if body == "terrain" else 1), drawn
+        assert any(path.endswith(f"/{body}") for path in entities(rrd)), entities(rrd)
+        moved = back.xpos[:, core.model.body(body).id]
+        if body == "terrain":  # laid where the episode's draw put it
+            assert np.linalg.norm(moved[0, :2]) > 0
+
+
+def test_a_car_driven_at_a_box_pushes_it_to_the_goal_and_a_still_one_does_not() -> None:
+    task = Push()
+    core = TaskCore(load_robot("robots/four_wheeler.json"), task=task, num_envs=2, seed=0)
+    core.reset()
+    box = core.joint_address("box")
+    core.qpos[:, box:box + 7] = [0.3, 0.0, task.box_size, 1.0, 0.0, 0.0, 0.0]
+    for arena in range(2):
+        obs = core.set_target(arena, [0.8, 0.0])
+    np.testing.assert_allclose(obs[:, 6:8], [[1, 0], [1, 0]], atol=1e-6)  # the box ahead
+    np.testing.assert_allclose(obs[:, -3:], [[1, 0, 0.5], [1, 0, 0.5]], atol=1e-6)
+    success, sums = drive(core, 1, 200)
+    assert list(success) == [True, False]
+    # the box went from 0.5 m to under goal_radius from the goal
+    assert task.push_weight * (0.5 - task.goal_radius) <= sums["push"][0] <= task.push_weight * 0.5
+    assert abs(sums["push"][1]) < 1e-6 and abs(sums["near"][1]) < 1e-6
+
+
+def test_rough_ground_varies_between_episodes_starts_level_and_a_driven_car_gets_there() -> None:
+    arena = ArenaParams(wall_height=0.2)
+    four = load_robot("robots/four_wheeler.json")
+    flat = TaskCore(four, num_envs=1, seed=0)
+    flat.reset()
+    core = TaskCore(four, arena=arena, task=Rough(), num_envs=16, seed=0)
+    core.reset()
+    placements = core.batch.bind("mocap_pos").reshape(16, -1, 3)[:, core.mocap_index("terrain"), :2]
+    assert len({tuple(p.round(6)) for p in placements}) > 4  # other stretches of the map
+    np.testing.assert_allclose(core.module_positions()[:, :, 2],  # level start: as on flat
+                               np.repeat(flat.module_positions()[:, :, 2], 16, axis=0))
+    for i in range(16):
+        core.set_target(i, [0.8, 0.0])
+    success, _ = drive(core, 8, 1000)
+    assert 2 <= success[:8].sum() < 8 and not success[8:].any(), success  # bumps in the way
+    assert core.unstable_count == 0
 
 
 def worked_example(tmp_path: Path) -> Path:

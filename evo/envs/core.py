@@ -182,7 +182,7 @@ class TaskCore:
             [m.jnt_qposadr[m.joint(f"rock{i}").id] for i in range(self.arena.n_rocks)],
             dtype=np.intp,
         )
-        self.target_mocap = int(m.body_mocapid[m.body("target").id])
+        self.target_mocap = self.mocap_index("target")
 
     def _allocate(self) -> None:
         n, m = self.num_envs, self.model
@@ -361,6 +361,14 @@ class TaskCore:
         outside = (np.abs(modules[:, :, :2]) > self.arena.side / 2).any(axis=(1, 2))
         high = (modules[:, :, 2] > self.task.max_height).any(axis=1)
         return np.asarray(outside | high, dtype=np.bool_)
+
+    def mocap_index(self, name: str) -> int:
+        """The index of mocap body ``name`` in ``MjData.mocap_pos``."""
+        return int(self.model.body_mocapid[self.model.body(name).id])
+
+    def joint_address(self, name: str) -> int:
+        """Where joint ``name``'s values start in a ``qpos`` row."""
+        return int(self.model.jnt_qposadr[self.model.joint(name).id])
 
     def module_positions(self) -> F64:
         """World position of every module in every arena, (N, modules, 3), from the

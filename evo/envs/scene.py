@@ -28,12 +28,12 @@ def build_scene(
     """The robot in its arena as MJCF (robot at the centre, rocks, the task's marker and
     objects)."""
     world = arena_scene(arena, task.marker_radius)
-    task.scene(world, arena)
 
     def scene(root: ET.Element) -> None:
         body = root.find("worldbody")
         assert body is not None
         body.extend(list(world))
+        task.scene(root, arena)
         if arena.sleep:
             option = root.find("option")
             assert option is not None

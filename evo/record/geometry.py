@@ -7,6 +7,9 @@ equal semi-axes); MuJoCo geoms map onto them as follows:
 * capsule: a cylinder and two end spheres (Foxglove has no capsule);
 * plane (the floor): a thin box 1 cm thick whose top is the plane, as large as the
   plane (10 m square when the plane is infinite);
+* height field (a task's terrain): a grid of at most :data:`HFIELD_BLOCKS` a side of
+  boxes standing on its zero level, each as high as the highest cell it covers (cells
+  at zero draw nothing);
 * mesh and other shapes: their bounding box (``geom_aabb``), so nothing vanishes.
 
 Geoms in groups 3..5 (hidden in MuJoCo's viewer by default) and fully transparent
@@ -32,6 +35,9 @@ PLANE_THICKNESS = 0.01
 
 INFINITE_PLANE_HALF = 5.0
 """Half side of the box that stands in for an infinite plane, m."""
+
+HFIELD_BLOCKS = 48
+"""Blocks a side of the boxes that draw a height field."""
 
 _DEFAULT_RGBA = np.array([0.5, 0.5, 0.5, 1.0])
 
@@ -169,8 +175,34 @@ def _pieces(model: mujoco.MjModel, g: int) -> list[tuple[str, F64, F64, F64]]:
         hy = size[1] if size[1] > 0 else INFINITE_PLANE_HALF
         centre = _shift(pos, quat, np.array([0.0, 0.0, -PLANE_THICKNESS / 2]))
         return [(BOX, centre, quat, np.array([hx, hy, PLANE_THICKNESS / 2]))]
+    if gtype == t.mjGEOM_HFIELD:
+        return _hfield_boxes(model, g, pos, quat)
     aabb = np.asarray(model.geom_aabb[g], dtype=np.float64)
     return [(BOX, _shift(pos, quat, aabb[:3]), quat, aabb[3:].copy())]
+
+
+def _hfield_boxes(model: mujoco.MjModel, g: int, pos: F64,
+                  quat: F64) -> list[tuple[str, F64, F64, F64]]:
+    """The boxes that draw height-field geom ``g``: its cells in blocks, each box as
+    high as the block's highest cell (MuJoCo's rows run along y, columns along x)."""
+    h = int(model.geom_dataid[g])
+    rows, cols = int(model.hfield_nrow[h]), int(model.hfield_ncol[h])
+    rx, ry, top, _ = (float(v) for v in model.hfield_size[h])
+    adr = int(model.hfield_adr[h])
+    heights = np.asarray(model.hfield_data[adr:adr + rows * cols]).reshape(rows, cols) * top
+    row_edges = np.linspace(0, rows, min(rows, HFIELD_BLOCKS) + 1).astype(int)
+    col_edges = np.linspace(0, cols, min(cols, HFIELD_BLOCKS) + 1).astype(int)
+    out = []
+    for r0, r1 in zip(row_edges[:-1], row_edges[1:], strict=True):
+        for c0, c1 in zip(col_edges[:-1], col_edges[1:], strict=True):
+            high = float(heights[r0:r1, c0:c1].max())
+            if high <= 1e-3:
+                continue
+            x = -rx + rx * (c0 + c1) / cols  # the block's centre in the geom's frame
+            y = -ry + ry * (r0 + r1) / rows
+            half = np.array([rx * (c1 - c0) / cols, ry * (r1 - r0) / rows, high / 2])
+            out.append((BOX, _shift(pos, quat, np.array([x, y, high / 2])), quat, half))
+    return out
 
 
 def scene_geometry(model: mujoco.MjModel) -> Geometry:

@@ -1,8 +1,9 @@
 """What a trained policy's deterministic robot does where its noisy one succeeds: the same
 episodes (targets and rocks) run with the mean action and with the policy's noise, side
 by side, and per mode the success, how far failed episodes end from the target, how
-much of them the robot stands still, and how often its mean action lies outside the
-action box [-1, 1].
+much of them the robot stands still (and of that, beside a rock), whether it ends them
+stuck (standing still for their last 5 s), and how often its mean action lies outside
+the action box [-1, 1].
 
     python docs/results/deployed/mechanism.py RETRAIN_DIR [TRAINING ...] \
         [--episodes 32] [--out docs/results/deployed/mechanism.csv]
@@ -23,9 +24,9 @@ import pandas as pd
 import torch
 from omegaconf import OmegaConf
 
-from evo.config import typed
+from evo.config import current, typed
 from evo.envs.core import TaskCore
-from evo.envs.params import EnvConfig
+from evo.envs.params import GLOBAL_SLOTS, EnvConfig
 from evo.learners.common import Policy, load_checkpoint
 from evo.robot import load_robot
 from evo.robot.builder import PhysicsParams
@@ -35,6 +36,25 @@ from evo.run.records import read_trainings
 
 STILL = 0.02
 """Brain speed over the ground (m/s) below which the robot counts as standing still."""
+
+BESIDE = 0.12
+"""A rock centre this close (m, horizontally) to a module centre: the robot is beside it."""
+
+STUCK = 100
+"""Control steps (5 s) standing still at the end of a failed episode: stuck for good."""
+
+DISTANCE = GLOBAL_SLOTS - 1
+"""The observation's slot of the reach task's distance d."""
+
+
+def beside_rock(core: TaskCore) -> np.ndarray:
+    """Whether each arena's robot has a rock within :data:`BESIDE` of a module."""
+    if not core.arena.n_rocks:
+        return np.zeros(core.num_envs, dtype=bool)
+    rocks = core.qpos[:, core.rock_qpos[:, None] + np.arange(2)]  # (N, rocks, 2)
+    modules = core.module_positions()[:, :, :2]  # (N, modules, 2)
+    gaps = np.linalg.norm(modules[:, :, None] - rocks[:, None], axis=-1)
+    return np.asarray((gaps < BESIDE).any(axis=(1, 2)))
 
 
 def episodes(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConfig,
@@ -46,10 +66,13 @@ def episodes(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConfi
     active = np.ones(count, dtype=bool)
     success = np.zeros(count, dtype=bool)
     still = np.zeros(count)
+    still_beside = np.zeros(count)
+    streak = np.zeros(count)
     steps = np.zeros(count)
     outside = np.zeros(count)
     travelled = np.zeros(count)
-    start = core.distance.copy()
+    start = obs[:, DISTANCE].astype(float)
+    end = start.copy()  # d where each episode ended
     sampler = policy.sampler()
     generator = torch.random.fork_rng(devices=[])
     with generator, torch.no_grad():
@@ -61,23 +84,30 @@ def episodes(robot: Robot, policy: Policy, physics: PhysicsParams, env: EnvConfi
             step = core.step(action.numpy())
             speed = np.linalg.norm(core.sensordata[:, core.i_linvel][:, :2], axis=1)
             steps += active
-            still += active & (speed < STILL)
+            resting = active & (speed < STILL)
+            still += resting
+            still_beside += resting & beside_rock(core)
+            streak = np.where(active, np.where(resting, streak + 1, 0), streak)
             travelled += active * speed * core.control_step
             outside += active * (loc.abs() > 1).float().mean(-1).numpy()
             success |= active & step.success
-            active &= ~(step.success | step.truncated)
             obs = step.observation
+            end = np.where(active, obs[:, DISTANCE], end)
+            active &= ~(step.success | step.truncated)
     failed = ~success
     return {
         "success": float(success.mean()),
         "still_share": float((still / steps).mean()),
         "mean_speed": float((travelled / (steps * core.control_step)).mean()),
-        "progress_failed": float((start - core.distance)[failed].mean())
+        "progress_failed": float((start - end)[failed].mean())
         if failed.any() else np.nan,
         "travelled_failed": float(travelled[failed].mean()) if failed.any() else np.nan,
-        "final_distance_failed": float(core.distance[failed].mean()) if failed.any() else np.nan,
+        "final_distance_failed": float(end[failed].mean()) if failed.any() else np.nan,
         "still_share_failed": float((still[failed] / steps[failed]).mean())
         if failed.any() else np.nan,
+        "still_beside_rock_failed": float(still_beside[failed].sum() / max(1, still[failed].sum()))
+        if failed.any() else np.nan,
+        "stuck_failed": float((streak[failed] >= STUCK).mean()) if failed.any() else np.nan,
         "mean_outside": float((outside / steps).mean()),
     }
 
@@ -90,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
     layout = RetrainLayout(args.folder)
-    config = OmegaConf.load(args.folder / "config.yaml")
+    config = current(OmegaConf.load(args.folder / "config.yaml"))
     physics = typed(PhysicsParams, config.morphology.physics, "morphology.physics")
     env = typed(EnvConfig, config.env, "env")
     rows = read_trainings(layout.trainings)

@@ -10,5 +10,8 @@ and termination, and what it adds to the scene. The batched core
 * ``reach`` (:class:`~evo.envs.tasks.reach.Reach`): reach a target on flat ground (the
   paper's task, ``evo/Reach-v0``);
 * ``locomotion`` (:class:`~evo.envs.tasks.locomotion.Locomotion`): travel as far as
-  possible along a heading in a fixed time (``evo/Locomotion-v0``).
+  possible along a heading in a fixed time (``evo/Locomotion-v0``);
+* ``push`` (:class:`~evo.envs.tasks.push.Push`): push a box to a goal (``evo/Push-v0``);
+* ``rough`` (:class:`~evo.envs.tasks.rough.Rough`): reach the target over a height field
+  of bumps and steps (``evo/Rough-v0``).
 """

@@ -48,10 +48,20 @@ class Arenas(Protocol):
     num_envs: int
     arena: ArenaParams
     sensordata: F64
+    qpos: F64
+    """(N, nq): every arena's joint positions (a free body's: x, y, z, then w, x, y, z)."""
     target: F64
     """(N, 3): where each arena's marker stands (what :meth:`Rules.draw` returned)."""
     steps: npt.NDArray[np.int64]
     """Control steps of each running episode."""
+
+    def mocap_index(self, name: str) -> int:
+        """The index of mocap body ``name`` in ``MjData.mocap_pos``."""
+        ...
+
+    def joint_address(self, name: str) -> int:
+        """Where joint ``name``'s values start in a ``qpos`` row."""
+        ...
 
     def module_positions(self) -> F64:
         """World position of every module, (N, modules, 3)."""
@@ -103,9 +113,10 @@ class Task:
     def check_arena(self, arena: ArenaParams) -> None:
         """Raise ``ValueError`` (naming the key) when ``arena`` cannot hold this task."""
 
-    def scene(self, world: ET.Element, arena: ArenaParams) -> None:
-        """Add the task's own bodies and geoms to the arena's ``<worldbody>`` (the
-        ``target`` marker and the arena's walls and rocks are there already)."""
+    def scene(self, root: ET.Element, arena: ArenaParams) -> None:
+        """Add the task's own bodies and assets to the scene's MJCF ``root``
+        (``<mujoco>``: its ``<worldbody>`` holds the robot, the arena's floor, walls and
+        rocks and the ``target`` marker already; its ``<asset>``, the builder's)."""
 
     def rules(self, core: Arenas) -> Rules:
         """The task's rules over ``core``'s arenas."""
