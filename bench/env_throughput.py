@@ -11,10 +11,13 @@ For each example robot, arena, batch size N and thread count, this measures in o
 
 Both are env steps per second (one env step = one control step of one arena). The ratio
 ``env / raw`` is what the environment's Python, numpy and TensorDict work costs; at the
-end, ``cluttered / clean`` compares the two arenas' raw physics for each robot, N and
-thread count (goal: >= 0.5, SPEC section 9).
+end, each setting's raw physics against the clean arena's for each robot, N and thread
+count (goal: >= 0.5, SPEC sections 3b and 9). A setting is an arena of the reach task
+(``clean``, ``cluttered``) or another task in its own arena (``locomotion``, ``push``,
+``rough``: ``conf/env/task/``, as ``env/task=<name>`` composes it).
 
-Usage: ``python bench/env_throughput.py [--steps 200] [--robots robots/*.json]``
+Usage: ``python bench/env_throughput.py [--steps 200] [--robots robots/*.json]
+[--arenas clean cluttered locomotion push rough]``
 """
 
 from __future__ import annotations
@@ -30,8 +33,9 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from evo.envs.arena import ArenaParams
+from evo.edge import compose_config, typed_config
 from evo.envs.core import TaskCore
+from evo.envs.params import EnvConfig
 from evo.envs.torchrl_env import TaskEnv
 from evo.robot import load_robot
 
@@ -65,13 +69,22 @@ def env_rate(env: TaskEnv, steps: int) -> float:
     return env.num_envs * steps / elapsed
 
 
+def setting(name: str) -> EnvConfig:
+    """The env of a setting: ``env=<arena>`` for reach's arenas, ``env/task=<task>``
+    otherwise, composed as ``evo/main.py`` would."""
+    override = f"env={name}" if name in ("clean", "cluttered") else f"env/task={name}"
+    return typed_config(compose_config([override])).env
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=200, help="control steps per measurement")
     parser.add_argument("--robots", nargs="+", default=sorted(glob.glob("robots/*.json")))
     parser.add_argument("--num-envs", type=int, nargs="+", default=[12, 64, 256])
     parser.add_argument("--nthread", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--arenas", nargs="+", default=["clean", "cluttered"])
+    parser.add_argument("--arenas", nargs="+", default=["clean", "cluttered"],
+                        help="reach's arenas and other tasks: clean cluttered locomotion push "
+                             "rough")
     parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats, best kept")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -83,11 +96,11 @@ def main() -> None:
     for path in args.robots:
         robot = load_robot(path)
         for arena_name in args.arenas:
-            arena = getattr(ArenaParams, arena_name)()
+            config = setting(arena_name)
             for n in args.num_envs:
                 for nthread in args.nthread:
-                    env = TaskEnv(TaskCore(robot, arena=arena, num_envs=n, nthread=nthread,
-                                             seed=0))
+                    env = TaskEnv(TaskCore(robot, arena=config.arena, task=config.task,
+                                           num_envs=n, nthread=nthread, seed=0))
                     steps = max(20, args.steps * 12 // n)
                     env_rate(env, steps // 4)  # warm up
                     # Interleaved repeats, best of each: the machine is shared and noisy.
@@ -104,9 +117,9 @@ def main() -> None:
     Console(width=200).print(table)
     for (name, arena_name, n, nthread), raw in raws.items():
         clean = raws.get((name, "clean", n, nthread))
-        if arena_name == "cluttered" and clean:
-            print(f"{name} N={n} threads={nthread}: raw cluttered / clean = {raw / clean:.2f} "
-                  f"({raw:,.0f} / {clean:,.0f} env steps/s)")
+        if arena_name != "clean" and clean:
+            print(f"{name} N={n} threads={nthread}: raw {arena_name} / clean = "
+                  f"{raw / clean:.2f} ({raw:,.0f} / {clean:,.0f} env steps/s)")
 
 
 if __name__ == "__main__":

@@ -2,14 +2,16 @@
 and the noisy policy's success after training (mean and worst seed), and along the
 training the policy's spread and its mean actions outside the action box.
 
-    python docs/results/deployed/table.py LEVER=RETRAIN_DIR ... --out docs/results/deployed
+    python docs/results/deployed/table.py LEVER=RETRAIN_DIR ... --out docs/results/deployed \
+        [--keep docs/results/deployed/protocol.csv]
 
 Each RETRAIN_DIR is a ``+exp=designer`` folder (``trainings.csv`` and the curves
 ``evals/<training>.csv``) trained with ``learner.eval_interval``. Beside the evaluation
 after training of the policy a training hands back (``success_rate``, 20 episodes, seed
 + 1), the table gives the last periodic evaluation (16 episodes, seed + 2): that of the
 last policy, which is the handed-back one unless ``learner.keep_best`` chose another.
-Writes ``protocol.csv`` (one row per training) and ``protocol.md``.
+Writes ``protocol.csv`` (one row per training) and ``protocol.md``; ``--keep`` adds the
+rows of an earlier ``protocol.csv`` for the levers and arenas the folders do not give.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folders", nargs="+", metavar="LEVER=RETRAIN_DIR")
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--keep", type=Path, help="an earlier protocol.csv")
     args = parser.parse_args(argv)
     parts = []
     for given in args.folders:
@@ -73,6 +76,12 @@ def main(argv: list[str] | None = None) -> int:
         parts.append(trainings(lever, Path(folder)))
     table = pd.concat(parts, ignore_index=True)
     table["gap"] = table["noisy_success"] - table["success"]
+    if args.keep is not None:
+        earlier = pd.read_csv(args.keep)
+        given = set(zip(table["lever"], table["arena"], strict=True))
+        kept = [(lever, arena) not in given
+                for lever, arena in zip(earlier["lever"], earlier["arena"], strict=True)]
+        table = pd.concat([earlier[kept], table], ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "protocol.csv", index=False)
     text = markdown_table(summary(table).round(3))
