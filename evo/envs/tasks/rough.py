@@ -158,4 +158,5 @@ class RoughRules(ReachRules):
         data.mocap_pos[self.terrain, :2] = -np.array([c * pad[0] - s * pad[1],
                                                       s * pad[0] + c * pad[1]])
         data.mocap_quat[self.terrain] = [math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2)]
+        target[2] = self.task.bump_height + self.task.step_height  # the marker above the map
         return target
