@@ -30,6 +30,8 @@ STUDIES: dict[str, tuple[str, str]] = {
                       "fitness: structure or seed? (python -m analysis.noise_ceiling)"),
     "noise_study": ("analysis.noise_study",
                     "the noise ceiling across settings (python -m analysis.noise_study)"),
+    "tasks": ("analysis.tasks",
+              "every body on every task: the cross-task matrix (python -m analysis.tasks)"),
     "noise_sweep": ("analysis.noise_sweep",
                     "the learner's settings against the noise (python -m analysis.noise_sweep)"),
 }
