@@ -69,11 +69,15 @@ def env_rate(env: TaskEnv, steps: int) -> float:
     return env.num_envs * steps / elapsed
 
 
+def setting_override(name: str) -> str:
+    """The override that chooses a setting: ``env=<arena>`` for reach's arenas (clean,
+    cluttered), ``env/task=<task>`` for another task in its own arena."""
+    return f"env={name}" if name in ("clean", "cluttered") else f"env/task={name}"
+
+
 def setting(name: str) -> EnvConfig:
-    """The env of a setting: ``env=<arena>`` for reach's arenas, ``env/task=<task>``
-    otherwise, composed as ``evo/main.py`` would."""
-    override = f"env={name}" if name in ("clean", "cluttered") else f"env/task={name}"
-    return typed_config(compose_config([override])).env
+    """The env of a setting, composed as ``evo/main.py`` would."""
+    return typed_config(compose_config([setting_override(name)])).env
 
 
 def main() -> None:

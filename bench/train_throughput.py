@@ -1,8 +1,8 @@
 """End-to-end PPO throughput, with its time split, against the raw physics rate.
 
-For every example robot and arena this trains PPO with the learner of one-robot
-training (``+exp=train``: ``conf/learner/ppo.yaml`` with ``conf/exp/train.yaml``'s
-overrides, and any Hydra overrides given on the command line) for ``--steps`` env steps
+For every example robot and arena (or task: ``--arenas locomotion push rough``) this
+trains PPO with the learner of one-robot training (``+exp=train``:
+``conf/learner/ppo.yaml`` with ``conf/exp/train.yaml``'s overrides, and any Hydra overrides given on the command line) for ``--steps`` env steps
 on ``--nthread`` physics threads and prints, from the same run:
 
 * env steps/s end to end (collection + GAE + update + curve bookkeeping);
@@ -40,7 +40,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
-from env_throughput import raw_rate  # bench/ is on sys.path when this script runs
+from env_throughput import raw_rate, setting_override  # bench/ is on sys.path here
 from rich.console import Console
 from rich.table import Table
 
@@ -161,8 +161,10 @@ def profile_by_library(run: Callable[[], object], title: str, top: int = 3) -> T
 
 
 def trained_with(arena: str, overrides: list[str]) -> TrainingParts:
-    """What ``python evo/main.py +exp=train env=<arena> <overrides>`` trains with."""
-    return typed_config(compose_config(["+exp=train", f"env={arena}", *overrides])).training
+    """What ``python evo/main.py +exp=train env=<arena> <overrides>`` trains with (or
+    ``env/task=<task>`` for a task other than reach: ``--arenas locomotion push rough``)."""
+    return typed_config(compose_config(["+exp=train", setting_override(arena),
+                                        *overrides])).training
 
 
 def plot_curves(folder: Path) -> Path:
