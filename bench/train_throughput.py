@@ -2,8 +2,9 @@
 
 For every example robot and arena (or task: ``--arenas locomotion push rough``) this
 trains PPO with the learner of one-robot training (``+exp=train``:
-``conf/learner/ppo.yaml`` with ``conf/exp/train.yaml``'s overrides, and any Hydra overrides given on the command line) for ``--steps`` env steps
-on ``--nthread`` physics threads and prints, from the same run:
+``conf/learner/ppo.yaml`` with ``conf/exp/train.yaml``'s overrides, and any Hydra
+overrides given on the command line) for ``--steps`` env steps on ``--nthread`` physics
+threads and prints, from the same run:
 
 * env steps/s end to end (collection + GAE + update + curve bookkeeping);
 * the split of wall time: physics (inside ``mujoco.batch``), env (the rest of the
