@@ -113,6 +113,15 @@ class Task:
     def check_arena(self, arena: ArenaParams) -> None:
         """Raise ``ValueError`` (naming the key) when ``arena`` cannot hold this task."""
 
+    @staticmethod
+    def within_walls(arena: ArenaParams, what: str, reach: float, why: str = "") -> None:
+        """Raise ``ValueError`` unless ``reach`` (m from the arena's centre; ``what``
+        names the keys it comes from) is below half the arena side less a wall."""
+        inside = arena.side / 2 - arena.wall_thickness
+        if reach >= inside:
+            raise ValueError(f"{what} ({reach} m) must be below half the arena side less "
+                             f"a wall, {inside:g} m (arena.side = {arena.side} m){why}")
+
     def scene(self, root: ET.Element, arena: ArenaParams) -> None:
         """Add the task's own bodies and assets to the scene's MJCF ``root``
         (``<mujoco>``: its ``<worldbody>`` holds the robot, the arena's floor, walls and

@@ -53,11 +53,7 @@ class Locomotion(Task):
         positive(self, "success_distance")
 
     def check_arena(self, arena: ArenaParams) -> None:
-        inside = arena.side / 2 - arena.wall_thickness
-        if self.success_distance >= inside:
-            raise ValueError(
-                f"success_distance ({self.success_distance} m) must be below half the "
-                f"arena side less a wall, {inside:g} m (arena.side = {arena.side} m)")
+        self.within_walls(arena, "success_distance", self.success_distance)
 
     def rules(self, core: Arenas) -> Rules:
         return LocomotionRules(self, core)

@@ -87,12 +87,8 @@ class Push(Task):
         return self.goal_radius
 
     def check_arena(self, arena: ArenaParams) -> None:
-        inside = arena.side / 2 - arena.wall_thickness
-        if self.box_max + self.goal_max >= inside:
-            raise ValueError(
-                f"box_max + goal_max ({self.box_max + self.goal_max:g} m) must be below half "
-                f"the arena side less a wall, {inside:g} m (arena.side = {arena.side} m): "
-                "the goal lies inside the walls")
+        self.within_walls(arena, "box_max + goal_max", round(self.box_max + self.goal_max, 9),
+                          ": the goal lies inside the walls")
 
     def scene(self, root: ET.Element, arena: ArenaParams) -> None:
         """The box: a free body ``box`` that the robot can push."""

@@ -60,12 +60,8 @@ class Reach(Task):
         return self.success_radius
 
     def check_arena(self, arena: ArenaParams) -> None:
-        inside = arena.side / 2 - arena.wall_thickness
-        if self.target_max >= inside:
-            raise ValueError(
-                f"target_max ({self.target_max} m) must be below half the arena side less "
-                f"a wall, {inside:g} m (arena.side = {arena.side} m): the target lies "
-                "inside the walls")
+        self.within_walls(arena, "target_max", self.target_max,
+                          ": the target lies inside the walls")
 
     def rules(self, core: Arenas) -> Rules:
         return ReachRules(self, core)

@@ -74,7 +74,7 @@ class Rough(Reach):
             raise ValueError(
                 f"terrain_size ({self.terrain_size} m) must cover the arena (side "
                 f"{arena.side} m) turned any way around a start pad: at least "
-                f"{2 * math.sqrt(2) * arena.side / 2:g} m")
+                f"{2 * math.sqrt(2) * (arena.side / 2 + arena.wall_thickness):g} m")
 
     def pad_reach(self, arena: ArenaParams) -> float:
         """How far from the map's centre a start pad may lie, m (the map still covers
