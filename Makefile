@@ -1,17 +1,18 @@
-# Two entry points: `make demo` runs the main job, `make test` runs the test suite.
-# Both create .venv on first use (torch's CPU wheel first, then the project with dev extras).
+# Entry points: `make demo` runs the main job, `make test` runs the test suite, `make docs`
+# builds the site. They create .venv on first use (torch's CPU wheel first, then the
+# project with its dev, ray, sweep and docs extras).
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-long lint bench clean-venv
+.PHONY: demo test test-long docs docs-serve lint bench clean-venv
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ".[dev,ray,sweep]"
+	$(BIN)/python -m pip install --quiet -e ".[dev,ray,sweep,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -22,6 +23,12 @@ test: $(STAMP)
 	$(BIN)/ruff check evo analysis tests bench
 	$(BIN)/mypy
 	$(BIN)/lint-imports
+
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+docs-serve: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
 
 test-long: $(STAMP)
 	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile -m long

@@ -1,8 +1,11 @@
-"""The README's shell commands and how the README tests run each one.
+"""The shell commands of the README and the documentation site, and how the tests run
+each one.
 
-Every line of a fenced ``bash`` block of ``README.md`` is a command (a trailing ``\\``
-joins the next line; ``# ...`` comments are dropped). ``source`` and ``export`` lines set
-up the shell: they run before every later command of their block, in the same shell.
+The pages are ``README.md`` and every page of the site's navigation (``mkdocs.yml``), in
+that order (:data:`PAGES`). Every line of a fenced ``bash`` block of a page is a command
+(a trailing ``\\`` joins the next line; ``# ...`` comments are dropped; a command on
+several pages counts once). ``source`` and ``export`` lines set up the shell: they run
+before every later command of their block, in the same shell.
 
 The tests run each command with ``bash`` in a copy of the repository root (a folder of
 links to the repository's files, so outputs land in a temporary folder, never in the
@@ -32,8 +35,31 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import yaml
+
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
+
+
+def site_pages() -> list[Path]:
+    """The pages of the site's navigation (``mkdocs.yml``'s ``nav``), in order."""
+    config = yaml.safe_load((REPO / "mkdocs.yml").read_text())
+    docs = REPO / config.get("docs_dir", "docs")
+
+    def walk(node: object) -> list[Path]:
+        if isinstance(node, str):
+            return [docs / node]
+        if isinstance(node, dict):
+            return [p for value in node.values() for p in walk(value)]
+        if isinstance(node, list):
+            return [p for item in node for p in walk(item)]
+        return []
+
+    return walk(config["nav"])
+
+
+PAGES = (README, *site_pages())
+"""The pages whose commands the tests run: the README, then the site's, in order."""
 SETUP = ("source ", "export ")
 """Lines that set up the shell for the lines after them in their block."""
 PLACEHOLDER = re.compile(r"<[a-z][a-z ]*>|\b[A-Z]+\.\.\.|\bREV\b")
@@ -53,19 +79,21 @@ class Command:
     setup: tuple[str, ...] = ()
 
 
-def readme_commands(readme: Path = README) -> list[Command]:
-    """Every command of the README's ``bash`` blocks, in order."""
-    found: list[Command] = []
-    for block in re.findall(r"^```bash\n(.*?)^```", readme.read_text(), re.S | re.M):
-        setup: list[str] = []
-        for line in block.replace("\\\n", " ").splitlines():
-            code = "" if line.lstrip().startswith("#") else line.split(" #")[0]
-            text = " ".join(code.split())
-            if text.startswith(SETUP):
-                setup.append(text)
-            elif text:
-                found.append(Command(text, tuple(setup)))
-    return found
+def readme_commands(*pages: Path) -> list[Command]:
+    """Every command of the pages' ``bash`` blocks (:data:`PAGES` when none are given),
+    in order, each once (where it first appears)."""
+    found: dict[str, Command] = {}
+    for page in pages or PAGES:
+        for block in re.findall(r"^```bash\n(.*?)^```", page.read_text(), re.S | re.M):
+            setup: list[str] = []
+            for line in block.replace("\\\n", " ").splitlines():
+                code = "" if line.lstrip().startswith("#") else line.split(" #")[0]
+                text = " ".join(code.split())
+                if text.startswith(SETUP):
+                    setup.append(text)
+                elif text:
+                    found.setdefault(text, Command(text, tuple(setup)))
+    return list(found.values())
 
 
 # ---------------------------------------------------------------- the tables
@@ -134,6 +162,28 @@ EXCLUDED: dict[str, str] = {
                    "runs the tool end to end on a tiny budget, resumed",
     "python -m analysis.designer designer/": "reads the folder the command above makes; "
                                              "tests/test_designer.py reports on its tiny one's",
+    "python bench/train_throughput.py --steps 150000 --quality --robots "
+    "robots/twisted_four_wheeler.json --arenas cluttered --nthread 1 --seed S":
+        "three 150k trainings in the cluttered arena, one per seed S (minutes each); the "
+        "same options run, small, in the benchmarks page's --quality command",
+    "make docs": "builds the site into site/; make test runs the same build with --strict "
+                 "(tests/test_docs.py)",
+    "python evo/main.py +exp=push hydra.sweep.dir=runs/tasks/push":
+        "six evolutions of 60 robots in the push task (about an hour on two cores); "
+        "tests/test_tasks.py runs a smoke evolution in a task and test_configs composes it",
+    "python evo/main.py +exp=task_fidelity env/task=push hydra.run.dir=runs/fidelity/push":
+        "48 trainings of 50k env steps (about 10 minutes on two cores); test_retrain runs "
+        "the retrain task end to end",
+    "python -m analysis.noise_ceiling runs/fidelity/push":
+        "reads the folder the command above makes; test_retrain reports on its robots'",
+    'PYTHONPATH=. python evo/main.py +exp=train robot=robots/snake.json env/task=escape '
+    '"hydra.searchpath=[file://$PWD/myconf]"':
+        "needs the worked example's module and YAML file written first: "
+        "tests/test_tasks.py writes them from docs/tasks.md and runs the training",
+    'PYTHONPATH=. python evo/main.py +exp=smoke env/task=escape '
+    '"hydra.searchpath=[file://$PWD/myconf]"':
+        "needs the worked example's module and YAML file written first: "
+        "tests/test_tasks.py writes them from docs/tasks.md and runs the smoke evolution",
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",
@@ -295,9 +345,9 @@ def how(command: Command) -> How:
     return HOW.get(command.text, How())
 
 
-def group(name: str, readme: Path = README) -> list[Command]:
-    """The commands test file ``name`` runs after its first runs, in README order."""
-    return [c for c in readme_commands(readme) if c.text not in EXCLUDED
+def group(name: str) -> list[Command]:
+    """The commands test file ``name`` runs after its first runs, in the pages' order."""
+    return [c for c in readme_commands() if c.text not in EXCLUDED
             and how(c).group == name and not how(c).makes_run]
 
 
