@@ -1,10 +1,12 @@
 """Replay saved robots: ``python -m evo.replay``.
 
 * ``python -m evo.replay RUN_DIR ROBOT_NAME [--episodes K] [--seed S] [--video out.mp4]
-  [--rrd out.rrd]``: reload the robot's trained policy, re-simulate K deterministic
-  episodes and write a video (MuJoCo offscreen rendering, ``MUJOCO_GL=egl``) and/or a
-  rerun recording. The same seed gives the same episodes as the recording made after
-  training (its seed is in the evaluation's metadata).
+  [--rrd out.rrd] [--size 640x480] [--fps 20] [--seconds S]``: reload the robot's trained
+  policy, re-simulate K deterministic episodes and write a video (MuJoCo offscreen
+  rendering, ``MUJOCO_GL=egl``; ``.mp4``, ``.webm`` or ``.gif``, of the first S simulated
+  seconds at most) and/or a rerun recording. The same seed gives the same episodes as the
+  recording made after training (its seed is in the evaluation's metadata). A short small
+  clip for a web page: ``--video clip.webm --size 320x240 --fps 10 --seconds 10``.
 * ``python -m evo.replay --gallery RUN_DIR [--top N] [--out robots.png]``: a picture of
   the run's best robots.
 
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -62,15 +65,51 @@ def _files(run_dir: Path, name: str | None) -> tuple[Robot, Path]:
     return load_robot(robot_path), policy_path
 
 
+@dataclass(frozen=True)
+class Clip:
+    """How a video is cut and encoded.
+
+    Attributes:
+        width: Frame width, pixels.
+        height: Frame height, pixels.
+        fps: Frames per second; the episodes' control steps are thinned to it (at most
+            the control rate: every step is a frame).
+        seconds: Simulated seconds shown at most, over all episodes (None: all of them).
+    """
+
+    width: int = 640
+    height: int = 480
+    fps: int = 20
+    seconds: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.width < 16 or self.height < 16 or self.fps < 1:
+            raise ValueError(f"video: size {self.width}x{self.height} and fps {self.fps} "
+                             "must be at least 16x16 and 1")
+        if self.seconds is not None and self.seconds <= 0:
+            raise ValueError(f"video: seconds {self.seconds} must be > 0")
+
+    def frames(self, time: npt.NDArray[np.float64], shown: float) -> list[int]:
+        """The steps of an episode (its ``time``, s) to draw, ``shown`` seconds already
+        drawn before it."""
+        step = float(np.median(np.diff(time))) if len(time) > 1 else 1.0 / self.fps
+        every = max(1, round(1.0 / (self.fps * step)))
+        end = np.inf if self.seconds is None else self.seconds - shown
+        return [t for t in range(0, len(time), every) if time[t] - time[0] <= end]
+
+
+CODECS = {".webm": {"codec": "libvpx-vp9", "bitrate": "300k"}}
+"""ffmpeg options per video suffix other than imageio's defaults."""
+
+
 def write_video(
     model: mujoco.MjModel,
     episodes: Sequence[Episode],
     path: Path,
-    width: int = 640,
-    height: int = 480,
-    fps: int = 20,
+    clip: Clip = Clip(),
 ) -> Path:
-    """Render every frame of ``episodes`` and encode them (mp4 via ffmpeg, or gif).
+    """Render the frames of ``episodes`` that ``clip`` keeps and encode them (mp4 or webm
+    via ffmpeg, or gif).
 
     The camera follows the robot: every frame it looks at the point between the brain
     and the target and stands back just far enough to keep both in view (smoothed over
@@ -78,22 +117,25 @@ def write_video(
     """
     import imageio.v2 as imageio
 
-    renderer = make_renderer(model, width, height)
+    renderer = make_renderer(model, clip.width, clip.height)
     data = mujoco.MjData(model)
     mocap = [(int(model.body_mocapid[b]), b) for b in range(model.nbody)
              if model.body_mocapid[b] >= 0]  # the target, a task's moving map
     brain = model.body("brain").id
     camera = mujoco.MjvCamera()
     camera.azimuth, camera.elevation = 135.0, -35.0
+    shown = 0.0
     try:
-        with imageio.get_writer(path, fps=fps) as writer:
+        with imageio.get_writer(path, fps=clip.fps, **CODECS.get(path.suffix, {})) as writer:
             for episode in episodes:
                 if episode.qpos is None:
                     raise ValueError(f"{path}: episode {episode.index} has no joint positions "
                                      "to render (a played episode has them)")
                 lookat, distance = tracking_shot(episode.xpos[:, brain], episode.target)
-                for t, qpos in enumerate(episode.qpos):
-                    data.qpos[:] = qpos
+                frames = clip.frames(episode.time, shown)
+                shown += float(episode.time[frames[-1]] - episode.time[0]) if frames else 0.0
+                for t in frames:
+                    data.qpos[:] = episode.qpos[t]
                     for index, body in mocap:  # where each stood in this frame
                         data.mocap_pos[index] = episode.xpos[t, body]
                         data.mocap_quat[index] = episode.xquat[t, body]
@@ -153,8 +195,10 @@ def replay(
     seed: int | None,
     video: Path | None,
     rrd: Path | None,
+    clip: Clip = Clip(),
 ) -> list[Episode]:
-    """Re-simulate ``episodes`` deterministic episodes and write the requested files.
+    """Re-simulate ``episodes`` deterministic episodes and write the requested files
+    (the video cut and encoded as ``clip`` says).
 
     With ``seed=None`` the first episode is the one recorded after training.
     """
@@ -169,7 +213,7 @@ def replay(
             f"{'success' if episode.success else 'no success'}"
         )
     if video is not None:
-        print(f"video: {write_video(core.model, played, video)}")
+        print(f"video: {write_video(core.model, played, video, clip)}")
     if rrd is not None:
         from evo.record.playback import write_replay_rrd
 
@@ -191,6 +235,16 @@ def gallery(run_dir: Path, top: int, out: Path) -> Path:
     return contact_sheet(robots, physics, out)
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``WxH`` as (width, height)."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not WIDTHxHEIGHT (e.g. 320x240)") from None
+    return width, height
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m evo.replay",
@@ -206,7 +260,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="episode seed (default: that of the recorded deterministic episode)",
     )
-    parser.add_argument("--video", type=Path)
+    parser.add_argument("--video", type=Path, help="video file: .mp4, .webm or .gif")
+    parser.add_argument("--size", type=_size, default=(640, 480), metavar="WxH",
+                        help="video frame size in pixels (default 640x480)")
+    parser.add_argument("--fps", type=int, default=20, help="video frames per second")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="simulated seconds the video shows at most (default: all)")
     parser.add_argument("--rrd", type=Path)
     parser.add_argument("--gallery", action="store_true", help="picture the best robots")
     parser.add_argument("--top", type=int, default=8)
@@ -216,7 +275,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.gallery:
             print(gallery(args.run_dir, args.top, args.out or args.run_dir / "best.png"))
         else:
-            replay(args.run_dir, args.name, args.episodes, args.seed, args.video, args.rrd)
+            (width, height), fps, seconds = args.size, args.fps, args.seconds
+            clip = Clip(width=width, height=height, fps=fps, seconds=seconds)
+            replay(args.run_dir, args.name, args.episodes, args.seed, args.video, args.rrd,
+                   clip)
     except (ValueError, ConfigError, RobotFileError, InvalidRobotError, RenderError) as err:
         print(f"replay: {err}", file=sys.stderr)
         return 2

@@ -65,3 +65,32 @@ def test_replay_cli_names_a_missing_robot(run_dir: Path) -> None:
     )
     assert missing.returncode == 2
     assert "robot-00000000" in missing.stderr and "Traceback" not in missing.stderr
+
+
+def test_a_clip_keeps_the_frames_asked_for(run_dir: Path, tmp_path: Path) -> None:
+    """``--size``, ``--fps`` and ``--seconds`` cut a short small webm: read back, it has
+    the size asked for and one frame per 1/fps of the first seconds."""
+    import imageio.v3 as iio
+
+    from evo.replay import Clip
+
+    name = pd.read_csv(run_dir / "history.csv")["name"].iloc[0]
+    clip = tmp_path / "clip.webm"
+    done = subprocess.run(
+        [sys.executable, "-m", "evo.replay", str(run_dir), name, "--video", str(clip),
+         "--size", "160x128", "--fps", "5", "--seconds", "2"],
+        capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    frames = iio.imread(clip, index=None)
+    assert frames.shape[1:3] == (128, 160)
+    assert 9 <= len(frames) <= 11  # 2 s at 5 fps, from a 20 Hz episode: steps 0, 4, ... 40
+    step = np.arange(0.0, 10.0, 0.05)
+    assert Clip(fps=5, seconds=2).frames(step, 0.0) == list(range(0, 41, 4))
+    assert Clip(fps=5, seconds=2).frames(step, 1.0) == list(range(0, 21, 4))
+    assert Clip(fps=40).frames(step, 0.0) == list(range(200)), "at most every step"
+    bad = subprocess.run(
+        [sys.executable, "-m", "evo.replay", str(run_dir), name, "--video", str(clip),
+         "--size", "160by128"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "WIDTHxHEIGHT" in bad.stderr
+    with pytest.raises(ValueError, match="seconds"):
+        Clip(seconds=0)
