@@ -41,6 +41,11 @@ def test_the_site_builds_strict(tmp_path: Path) -> None:
         assert (tmp_path / page).is_file(), f"the site has no {page}"
     api = (tmp_path / "api" / "envs.html").read_text()
     assert "TaskCore" in api and "Rules" in api, "the API reference renders the docstrings"
+    reference = (tmp_path / "guide" / "config-reference.html").read_text()
+    for said in ("learner.lr", "lr must be &gt; 0", "Adam learning rate",  # a key's range
+                 "env.task.heading_range", "heading_range must be in [0, 180]",  # a task's
+                 "ga.schedule.inherited"):
+        assert said in reference, f"the configuration reference does not say {said!r}"
 
 
 def test_the_pages_have_python_snippets() -> None:
