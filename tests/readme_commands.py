@@ -244,6 +244,11 @@ HOW: dict[str, How] = {
     "python evo/main.py +exp=ablation": How(
         append=TINY_EVOLUTION, makes_run="ablation",
         group=ANALYSIS),
+    # ---- the docs
+    "MUJOCO_GL=egl bash docs/gallery.sh": How(
+        append=f"gallery_test learner.total_steps=1024 {TINY_TRAINING}",
+        env="GALLERY_ONLY=reach_clean_designed",
+        makes=("gallery_test/reach_clean_designed.webm",)),
     # ---- evo
     "python evo/main.py +exp=train robot=robots/snake.json env/task=locomotion": How(
         append=f"learner.total_steps=1024 {TINY_TRAINING}", says="deterministic evaluation:"),
