@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 import numpy.typing as npt
 
+from evo.checks import at_least, positive
 from evo.config import ConfigError
 from evo.edge import run_config
 from evo.envs.params import EnvConfig, observation_size
@@ -83,11 +84,10 @@ class Clip:
     seconds: float | None = None
 
     def __post_init__(self) -> None:
-        if self.width < 16 or self.height < 16 or self.fps < 1:
-            raise ValueError(f"video: size {self.width}x{self.height} and fps {self.fps} "
-                             "must be at least 16x16 and 1")
-        if self.seconds is not None and self.seconds <= 0:
-            raise ValueError(f"video: seconds {self.seconds} must be > 0")
+        at_least(self, 16, "width", "height", note=" pixels")
+        at_least(self, 1, "fps")
+        if self.seconds is not None:
+            positive(self, "seconds")
 
     def frames(self, time: npt.NDArray[np.float64], shown: float) -> list[int]:
         """The steps of an episode (its ``time``, s) to draw, ``shown`` seconds already
