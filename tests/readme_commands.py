@@ -62,6 +62,8 @@ PAGES = (README, *site_pages())
 """The pages whose commands the tests run: the README, then the site's, in order."""
 SETUP = ("source ", "export ")
 """Lines that set up the shell for the lines after them in their block."""
+ASSIGNMENT = re.compile(r"""[A-Za-z_]\w*=("[^"]*"|'[^']*'|\S+)""")
+"""A shell variable set on a line of its own (``ROBOTS=a,b``): it sets up the shell too."""
 PLACEHOLDER = re.compile(r"<[a-z][a-z ]*>|\b[A-Z]+\.\.\.|\bREV\b")
 """What a placeholder looks like: ``<run dir>``, ``RUN...``, ``REV``."""
 
@@ -86,14 +88,31 @@ def readme_commands(*pages: Path) -> list[Command]:
     for page in pages or PAGES:
         for block in re.findall(r"^```bash\n(.*?)^```", page.read_text(), re.S | re.M):
             setup: list[str] = []
-            for line in block.replace("\\\n", " ").splitlines():
-                code = "" if line.lstrip().startswith("#") else line.split(" #")[0]
-                text = " ".join(code.split())
-                if text.startswith(SETUP):
+            for text in _lines(block):
+                if text.startswith(SETUP) or ASSIGNMENT.fullmatch(text):
                     setup.append(text)
-                elif text:
+                else:
                     found.setdefault(text, Command(text, tuple(setup)))
     return list(found.values())
+
+
+def _lines(block: str) -> list[str]:
+    """A block's commands: continuations joined, comments dropped, and a ``for`` loop's
+    lines, from its ``do`` to its ``done``, joined into one command."""
+    lines, loop, depth = [], "", 0
+    for line in block.replace("\\\n", " ").splitlines():
+        code = "" if line.lstrip().startswith("#") else line.split(" #")[0]
+        text = " ".join(code.split())
+        if not text:
+            continue
+        words = [word.strip(";") for word in text.split()]
+        depth += words.count("do") - words.count("done")
+        joint = "" if not loop else " " if loop.endswith("do") else "; "
+        loop = f"{loop}{joint}{text}"
+        if depth == 0:
+            lines.append(loop)
+            loop = ""
+    return lines
 
 
 # ---------------------------------------------------------------- the tables
@@ -187,6 +206,150 @@ EXCLUDED: dict[str, str] = {
     "EVO_RUNS=outputs/ablation/<date> jupyter lab analysis/":
         "starts an interactive JupyterLab server; the kernel it starts is the one "
         "`jupyter execute` starts, run above from the same folder",
+    # ---- the results pages: the experiments that made the committed data
+    "docs/results/ablation/run.sh": "the ablation's runs (about 8 hours on two cores); "
+                                    "test_ablation_config runs +exp=ablation's loop small",
+    'ARMS="E+L+I" docs/results/ablation/run.sh': "five evolutions of 100 robots (hours)",
+    'SEEDS="5 6 7 8 9 10 11 12" ARMS="E+L E+R R+L R+R" ROBOTS=60 JOBS=4 '
+    "docs/results/ablation/run.sh": "32 evolutions of 60 robots (hours)",
+    'ARENA=cluttered ROBOTS=60 ARMS="E+L E+L+I" SEEDS="0 1 2" docs/results/ablation/run.sh':
+        "six evolutions of 60 robots in the cluttered arena (about 1.6 hours)",
+    **{f"python evo/main.py +exp=ablation_100k hydra.mode=RUN ga.structure={s} "
+       f"learner={learner} seed=0 executor=serial hydra.run.dir=runs/ablation_100k/{m}_seed0":
+       "an evolution of 100 robots at 100k env steps each (hours); test_configs composes "
+       "+exp=ablation_100k"
+       for s, learner, m in (("E", "ppo", "E+L"), ("E", "random", "E+R"),
+                             ("R", "ppo", "R+L"), ("R", "random", "R+R"))},
+    "python evo/main.py resume=runs/ablation_100k/E+L_seed0":
+        "resumes the run above; the README's resume command runs on the smoke run",
+    'SEEDS="0 1 2" docs/results/ablation_100k/run.sh': "twelve evolutions (hours)",
+    "python -m analysis.report runs/ablation_100k/*_seed[012] --out docs/results/ablation_100k "
+    "--first 60": "reads the recordings of the runs above, which are not committed; the "
+                  "page's --history-only command reads the committed runs",
+    "python -m analysis.early_slope runs/ablation_100k/*_seed[012] --out "
+    "docs/results/ablation_100k/early_slope --first 60 --retrained runs/noise/default_100k":
+        "reads the runs' recordings and a noise-ceiling folder, neither committed; "
+        "test_analysis_report runs analysis.early_slope on the shared ablation",
+    "python evo/main.py -m +exp=train seed=0,1,2,3,4 env=clean robot=$ROBOTS env.nthread=1 "
+    "hydra.sweep.dir=runs/designer_clean": "20 trainings of 150k env steps (about an hour)",
+    "python evo/main.py -m +exp=train seed=0,1,2 env=cluttered robot=$ROBOTS env.nthread=1 "
+    "hydra.sweep.dir=runs/designer_cluttered": "12 trainings of 150k env steps in the "
+                                               "cluttered arena (about an hour)",
+    "python docs/results/designer/table.py runs/designer_clean runs/designer_cluttered "
+    "docs/results/designer": "reads the trainings the two sweeps above make",
+    "python -m analysis.designer --robots robots --arena clean --seeds 3 --confirm 3 --jobs 2 "
+    "--out runs/designer_clean env.nthread=1": "trainings of 150k env steps (about an hour); "
+                                               "tests/test_designer.py runs the tool tiny",
+    "python -m analysis.designer --robots robots --arena cluttered --seeds 3 --confirm 3 "
+    "--jobs 2 --out runs/designer_cluttered env.nthread=1":
+        "trainings of 150k env steps (about an hour); tests/test_designer.py runs the tool tiny",
+    "python -m analysis.designer --runs runs/ablation_cluttered/E+L_seed* "
+    "runs/ablation_cluttered/E+L+I_seed* --robots robots --arena cluttered --seeds 3 "
+    "--confirm 6 --jobs 2 --out runs/designer_cluttered env.nthread=1":
+        "trainings of 150k env steps (about an hour); tests/test_designer.py runs the tool tiny",
+    "python -m analysis.designer --runs runs/ablation/E+L_seed[0-4] runs/ablation/E+L+I_seed[0-4] "
+    "--robots robots --arena clean --seeds 3 --confirm 6 --jobs 2 --out runs/designer_clean "
+    "env.nthread=1": "trainings of 150k env steps (about an hour); tests/test_designer.py "
+                     "runs the tool tiny",
+    "for s in 0 1 2; do for i in parent off; do python evo/main.py +exp=inheritance_laptop "
+    "ga.inheritance=$i seed=$s hydra.run.dir=runs/inheritance/${i}_seed$s; done; done":
+        "six evolutions (hours); test_configs composes +exp=inheritance_laptop",
+    "python evo/main.py -m +exp=train seed=0,1,2 env=clean robot=$(ls runs/best/*.json | "
+    "paste -sd, -) learner.lmbda=0.95 learner.entropy_coeff=0.005 learner.init_log_std=-0.5 "
+    "learner.reward_scaling=false env.nthread=1 hydra.sweep.dir=runs/inh_retrain":
+        "trainings of 150k env steps of robots copied from the runs above (about an hour)",
+    "python docs/results/designer/table.py runs/inh_retrain docs/results/inheritance/retrained":
+        "reads the trainings the sweep above makes",
+    **{f"python bench/early_rejection.py runs/paper_clean_timing --margins {m} --predictors "
+       f"value curve{c} --out docs/results/early_rejection/paper_clean_seed0{h}.md":
+       "reads the learning curves of a +exp=paper_clean run (its recordings, not committed; "
+       "about 40 minutes to make); the guide's bench/early_rejection.py command runs on the "
+       "smoke run"
+       for m, c, h in (("0 0.1 0.2 0.3 0.5", "", ""),
+                       ("0.1 0.2 0.3 0.5", " --checkpoints 0.5", "_half"))},
+    **{f"python bench/early_rejection.py runs/ablation/E+L_seed0 runs/ablation/R+L_seed0 "
+       f"--margins {m} --predictors value curve{c} --out "
+       f"docs/results/early_rejection/ablation_seed0{h}.md":
+       "reads the learning curves of the 100k ablation's runs (their recordings, not "
+       "committed); the guide's bench/early_rejection.py command runs on the smoke run"
+       for m, c, h in (("0 0.1 0.2 0.3 0.5 0.8", "", ""),
+                       ("0.1 0.2 0.3 0.5", " --checkpoints 0.5", "_half"))},
+    "python bench/early_rejection.py runs/paper_clean/seed1 runs/paper_clean/seed2 --margins "
+    "0.3 --predictors value --checkpoints 0.5 --out "
+    "docs/results/early_rejection/paper_clean_heldout.md":
+        "reads the runs' learning curves (their recordings, not committed: the committed "
+        "copies keep history, summary and population)",
+    "docs/results/early_rejection/run.sh": "six +exp=paper_clean runs (about 4 hours)",
+    "python -m analysis.equal_cost --without runs/paper_clean --with runs/paper_clean_early "
+    "--out docs/results/early_rejection": "reads the six runs run.sh makes (hours); their "
+                                          "committed copies keep no config.yaml, which "
+                                          "the analysis needs",
+    "for t in locomotion push rough; do python evo/main.py +exp=designer retrain.robots=robots "
+    "retrain.seeds=5 retrain.confirm=0 env/task=$t hydra.run.dir=runs/handmade/$t; "
+    "python -m analysis.designer runs/handmade/$t; done":
+        "90 trainings of 150k env steps (hours); tests/test_tasks.py trains in every task",
+    "for t in locomotion push rough; do python evo/main.py +exp=task_fidelity env/task=$t "
+    "hydra.run.dir=runs/fidelity/$t; python -m analysis.noise_ceiling runs/fidelity/$t; done":
+        "three noise ceilings of 48 trainings (about 30 minutes); test_retrain runs the "
+        "retrain task end to end",
+    "python evo/main.py +exp=task_fidelity env/task=push env.task.t_max=400 "
+    "hydra.run.dir=runs/fidelity/push_t400": "48 trainings (about 10 minutes)",
+    "python evo/main.py +exp=task_fidelity env/task=rough retrain.budget=100000 "
+    "hydra.run.dir=runs/fidelity/rough_100k": "48 trainings of 100k env steps (about 20 minutes)",
+    "python evo/main.py +exp=locomotion record=off hydra.sweep.dir=runs/tasks/locomotion":
+        "six evolutions of 60 robots (about an hour); tests/test_tasks.py runs a smoke "
+        "evolution in a task",
+    "python evo/main.py +exp=rough record=off hydra.sweep.dir=runs/tasks/rough":
+        "six evolutions of 60 robots (about an hour); tests/test_tasks.py runs a smoke "
+        "evolution in a task",
+    "python evo/main.py +exp=push record=off hydra.sweep.dir=runs/tasks/push":
+        "six evolutions of 60 robots (about an hour); tests/test_tasks.py runs a smoke "
+        "evolution in a task",
+    **{f'python evo/main.py +exp=designer retrain.robots=robots "retrain.runs=[runs/tasks/{t}]" '
+       f"retrain.seeds=5 retrain.confirm=6 env/task={t} hydra.run.dir=runs/designer/{t}":
+       "trainings of 150k env steps of the evolutions' best robots and the hand-made ones "
+       "(hours); tests/test_designer.py runs +exp=designer tiny"
+       for t in ("locomotion", "push", "rough")},
+    "python -m analysis.designer runs/designer/locomotion":
+        "reads the folder the command above makes; tests/test_designer.py reports on its "
+        "tiny one's",
+    "for t in reach locomotion push rough; do python evo/main.py +exp=designer "
+    "retrain.robots=docs/results/tasks/matrix/bodies retrain.seeds=3 retrain.confirm=0 "
+    "env/task=$t hydra.run.dir=runs/matrix/$t; done":
+        "84 trainings of 150k env steps (hours); the page's next command remakes the "
+        "table from their committed trainings",
+    "python -m analysis.tasks reach=runs/matrix/reach locomotion=runs/matrix/locomotion "
+    "push=runs/matrix/push rough=runs/matrix/rough --out docs/results/tasks/matrix":
+        "writes into docs/results; the page's next command runs it on the committed "
+        "trainings",
+    **{f"python evo/main.py $P {lever} hydra.run.dir=runs/deployed/{name}":
+       "25 trainings of 150k env steps with periodic evaluation (about an hour); "
+       "tests/test_learner.py trains with each lever"
+       for lever, name in (("learner.keep_best=true env=clean", "keep_best_clean"),
+                           ("learner.keep_best=true env=cluttered", "keep_best_cluttered"),
+                           ("learner.bound_mean=true env=clean", "bound_mean_clean"),
+                           ("learner.final_log_std=-2.5 env=clean", "anneal_clean"),
+                           ("learner.keep_best=true learner.final_log_std=-2.0 "
+                            "learner.anneal_from=0.5 env=cluttered", "late_anneal_cluttered"))},
+    "python docs/results/deployed/table.py keep_best=runs/deployed/keep_best_clean "
+    "keep_best=runs/deployed/keep_best_cluttered bound_mean=runs/deployed/bound_mean_clean "
+    "anneal=runs/deployed/anneal_clean late_anneal=runs/deployed/late_anneal_cluttered "
+    "--out docs/results/deployed": "reads the trainings the commands above make",
+    "python docs/results/deployed/mechanism.py runs/deployed/keep_best_clean snake_seed0 "
+    "--out docs/results/deployed/mechanism.csv": "reads a training's recordings, which the "
+                                                 "commands above make",
+    "python docs/results/deployed/mechanism.py runs/deployed/late_anneal_cluttered "
+    "four_wheeler_seed2 crawler_seed4 --out docs/results/deployed/mechanism_cluttered.csv":
+        "reads the trainings' recordings, which the commands above make",
+    "docs/results/noise_sweep/levers/run.sh": "five noise ceilings of 32 trainings (hours)",
+    "python evo/main.py +exp=paper_cluttered hydra.run.dir=runs/paper_cluttered_final":
+        "the paper's run in the cluttered arena (hours); test_configs composes it",
+    "python evo/main.py resume=runs/paper_cluttered_final":
+        "resumes the run above; the README's resume command runs on the smoke run",
+    "cp runs/paper_cluttered_final/{history.csv,summary.json} docs/results/paper_cluttered/":
+        "copies the run above's files into docs/results",
+    "python evo/main.py +exp=paper_cluttered hydra.run.dir=runs/paper_cluttered_timing":
+        "the paper's run in the cluttered arena (hours); test_configs composes it",
 }
 """Commands a test cannot run, each with its reason."""
 
@@ -214,7 +377,9 @@ class How:
         says: Text its standard output must hold.
         makes_run: The name under which the run directory it creates is kept for
             :data:`PLACES`; such a command runs first, when its test file starts.
-        group: ``"main"`` (tests/test_readme.py, around the smoke run) or ``"analysis"``
+        group: ``"main"`` (tests/test_readme.py, around the smoke run), ``"results"``
+            (tests/test_results_commands.py: the results pages' analyses of the
+            committed data) or ``"analysis"``
             (tests/test_analysis_report.py, around the ablation it shares with the
             analysis tests).
         long: A variant of a command the default tier already runs (other options of
@@ -235,6 +400,7 @@ THROUGHPUT = ("env.task.t_max=50 --steps 256 --robots robots/four_wheeler.json "
               "--arenas clean")  # overrides first: the README line may end in overrides
 SMALL_THROUGHPUT = f"learner.num_envs=16 learner.minibatch_size=128 {THROUGHPUT}"
 ANALYSIS = "analysis"
+RESULTS = "results"
 HOW: dict[str, How] = {
     # ---- the runs the others read, made first
     "python evo/main.py +exp=smoke": How(makes_run="smoke", says="best robot:"),
@@ -301,6 +467,58 @@ HOW: dict[str, How] = {
     "python bench/physics_step.py": How(
         append="--robots robots/four_wheeler.json --seconds 0.5 --arenas 2 --num-envs 4 "
                "--rate-steps 10", says="verdict"),
+    # ---- the results pages: their analyses read the committed data again (outputs
+    # redirected out of docs/results by a second --out, which wins)
+    "mkdir -p runs && cp -r docs/results/ablation/runs runs/ablation": How(
+        makes=("runs/ablation/E+L_seed0/history.csv",), group=RESULTS),
+    "python -m analysis.report runs/ablation --out docs/results/ablation --history-only "
+    "--first 60": How(append="--out check/ablation --resamples 200",
+                      makes=("check/ablation/report.md",), group=RESULTS),
+    "python -m analysis.power runs/ablation --history-only --first 60": How(
+        says="E+L − R+L", group=RESULTS),
+    "python -m analysis.power runs/ablation --history-only --first 60 --pair E+L+I E+L": How(
+        says="E+L+I − E+L", group=RESULTS),
+    "python -m analysis.report docs/results/ablation_100k/runs --history-only --first 60 "
+    "--out docs/results/ablation_100k": How(append="--out check/ablation_100k --resamples 200",
+                                            makes=("check/ablation_100k/report.md",),
+                                            group=RESULTS),
+    "python -m analysis.power docs/results/ablation_100k/runs --history-only --first 60": How(
+        says="E+L − R+L", group=RESULTS),
+    "python -m analysis.report docs/results/ablation_cluttered/runs --out "
+    "docs/results/ablation_cluttered/report --history-only": How(
+        append="--out check/ablation_cluttered --resamples 200",
+        makes=("check/ablation_cluttered/report.md",), group=RESULTS),
+    "python -m analysis.inheritance docs/results/ablation/runs/E+L_seed[0-4] "
+    "docs/results/ablation/runs/E+L+I_seed[0-4] --out docs/results/inheritance/ablation": How(
+        append="--out check/inheritance_ablation",
+        makes=("check/inheritance_ablation/report.md", "check/inheritance_ablation/*.png"),
+        group=RESULTS),
+    "python -m analysis.inheritance docs/results/inheritance/runs --out docs/results/inheritance":
+        How(append="--out check/inheritance", makes=("check/inheritance/report.md",),
+            group=RESULTS),
+    "python -m analysis.tasks reach=docs/results/tasks/matrix/reach "
+    "locomotion=docs/results/tasks/matrix/locomotion push=docs/results/tasks/matrix/push "
+    "rough=docs/results/tasks/matrix/rough --out matrix/": How(
+        makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
+    "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
+    "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs && cp -r docs/results/noise_sweep/study runs/noise_sweep": How(
+        makes=("runs/noise_sweep/*",), group=RESULTS),
+    # ---- the results pages' benchmarks: variants of the benchmarks above, small
+    "python bench/env_throughput.py --arenas clean locomotion push rough --num-envs 32 "
+    "--nthread 1 --steps 200": How(append="--steps 10 --num-envs 4 --repeats 1 --robots "
+                                          "robots/four_wheeler.json", long=True),
+    "python bench/train_throughput.py --arenas clean locomotion push rough --robots "
+    "robots/four_wheeler.json robots/snake.json": How(
+        append="--steps 256 learner.num_envs=16 learner.minibatch_size=128 env.task.t_max=50",
+        long=True),
+    "python bench/train_throughput.py --steps 20480 --arenas clean --nthread 1 "
+    "learner.num_envs=32 learner.rollout_steps=64 learner.lr=3e-4 learner.minibatch_size=1024 "
+    "learner.lmbda=0.8 learner.entropy_coeff=0 learner.init_log_std=-1 "
+    "learner.reward_scaling=true physics_step=dt6p25ms_x8": How(append=THROUGHPUT, long=True),
+    **{f"python bench/soak.py --executor {executor} --evals 1000 --every 100": How(
+        append="--evals 4 --every 2", says="after the first", long=True)
+       for executor in ("local", "serial", "ray")},
 }
 """Per command: how it is run, where that is not exactly as written."""
 
