@@ -233,11 +233,20 @@ class RunConfig:
         seed: The ``seed`` key as written (None when missing).
         ga: The ``ga`` group (empty when missing or not a mapping).
         learner: The ``learner`` group (empty when missing or not a mapping).
+        env: The ``env`` group (empty when missing or not a mapping).
     """
 
     seed: object = None
     ga: Mapping[str, object] = field(default_factory=dict)
     learner: Mapping[str, object] = field(default_factory=dict)
+    env: Mapping[str, object] = field(default_factory=dict)
+
+    @property
+    def t_max(self) -> int:
+        """``env.task.t_max``: the task's control steps per episode (the task default,
+        1,000, where the config does not say)."""
+        task = self.env.get("task")
+        return int(task.get("t_max", 1000)) if isinstance(task, dict) else 1000
 
     @classmethod
     def of(cls, document: Mapping[str, object]) -> RunConfig:
@@ -247,7 +256,8 @@ class RunConfig:
             node = document.get(name)
             return {str(k): v for k, v in node.items()} if isinstance(node, dict) else {}
 
-        return cls(seed=document.get("seed"), ga=group("ga"), learner=group("learner"))
+        return cls(seed=document.get("seed"), ga=group("ga"), learner=group("learner"),
+                   env=group("env"))
 
 
 def read_config(run_dir: Path) -> RunConfig:

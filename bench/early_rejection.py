@@ -1,7 +1,8 @@
 """Early rejection calibrated offline: replay the stopping rule on fully trained curves.
 
     python bench/early_rejection.py RUN... [--margins 0 0.05 0.1 0.2]
-        [--predictors value curve] [--checkpoints 0.2 0.35 0.5] [--out FILE.md]
+        [--predictors value curve rate] [--checkpoints 0.2 0.35 0.5] [--first N]
+        [--out FILE.md]
 
 For every offspring of the given evolution runs (trained over its whole budget, rule
 off), the rule (``evo.early_rejection``, as the GA applies it) is replayed on its
@@ -27,84 +28,25 @@ import itertools
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NotRequired, TypedDict
 
-import numpy as np
 import pandas as pd
-import scipy.stats
 
 from analysis.load import load_runs
 from analysis.markdown import markdown_table
-from analysis.population import population_trace
-from evo.early_rejection import Curve, EarlyRejection, replay_rule
-
-
-def replay(robots: pd.DataFrame, curves: pd.DataFrame, population_sizes: dict[str, int],
-           rule: EarlyRejection) -> pd.DataFrame:
-    """Per offspring: the minimum it faced, whether it was accepted, whether (and at
-    which fraction of its budget) the rule stops it."""
-    rows = []
-    for run, run_robots in robots.groupby("run"):
-        trace = population_trace(run_robots, population_sizes.get(str(run), 20))
-        merged = run_robots.merge(trace[["name", "threshold"]], on="name")
-        by_name = {name: Curve.from_rows(c) for name, c in
-                   curves[curves["run"] == run].groupby("name")}
-        for robot in merged.itertuples(index=False):
-            if not np.isfinite(robot.threshold) or robot.name not in by_name:
-                continue
-            budget = float(robot.scheduled_budget or robot.budget)  # as the GA gave it
-            verdict = replay_rule(rule, by_name[robot.name], budget, float(robot.threshold))
-            rows.append(dict(run=run, name=robot.name, budget=budget,
-                             accepted=bool(robot.accepted), threshold=robot.threshold,
-                             stopped=verdict is not None,
-                             fraction=verdict.fraction if verdict else 1.0))
-    return pd.DataFrame(rows)
-
-
-class Score(TypedDict):
-    """A rule's replay (:func:`score`); with no offspring, only their count."""
-
-    offspring: int
-    accepted: NotRequired[int]
-    stopped: NotRequired[int]
-    false_rejections: NotRequired[float]  # share of the accepted offspring the rule stops
-    ci_low: NotRequired[float]  # Wilson CI of false_rejections
-    ci_high: NotRequired[float]
-    saved: NotRequired[float]  # share of the rejected offspring's env steps saved
-    schedule: NotRequired[float]  # all env steps over those left to train
-
-
-def score(offspring: pd.DataFrame, all_steps: float) -> Score:
-    """False rejections (with a Wilson CI), env steps saved, schedule ratio."""
-    if offspring.empty:
-        return Score(offspring=0)
-    accepted = offspring[offspring["accepted"]]
-    false = int(accepted["stopped"].sum())
-    ci = (scipy.stats.binomtest(false, len(accepted)).proportion_ci(method="wilson")
-          if len(accepted) else None)
-    rejected = offspring[~offspring["accepted"]]
-    saved = float(((1 - rejected["fraction"]) * rejected["budget"]).sum())
-    lost = float(((1 - accepted["fraction"]) * accepted["budget"]).sum())
-    return Score(
-        offspring=len(offspring), accepted=len(accepted), stopped=int(offspring["stopped"].sum()),
-        false_rejections=false / len(accepted) if len(accepted) else np.nan,
-        ci_low=ci.low if ci else np.nan, ci_high=ci.high if ci else np.nan,
-        saved=saved / max(float(rejected["budget"].sum()), 1.0),
-        schedule=all_steps / max(all_steps - saved - lost, 1.0),
-    )
+from analysis.rejection import replay_runs, score
+from evo.early_rejection import EarlyRejection
 
 
 def calibrate(paths: Sequence[Path], predictors: Sequence[str], margins: Sequence[float],
-              checkpoints: Sequence[float]) -> pd.DataFrame:
-    """The table of :func:`score` for every predictor and margin."""
-    runs = load_runs(paths)
-    robots = runs.robots[runs.robots["status"] != "stopped-early"]
-    all_steps = float(robots["budget"].sum())
+              checkpoints: Sequence[float], first: int | None = None) -> pd.DataFrame:
+    """The table of :func:`score` for every predictor and margin (on each run's first
+    ``first`` robots, or all)."""
+    runs = load_runs(paths, first=first)
     rows = []
     for predictor, margin in itertools.product(predictors, margins):
         rule = EarlyRejection(enabled=True, checkpoints=tuple(checkpoints),
                               predictor=predictor, margin=margin)
-        offspring = replay(robots, runs.curves, runs.population_sizes, rule)
+        offspring, all_steps = replay_runs(runs, rule)
         rows.append(dict(predictor=predictor, margin=margin, **score(offspring, all_steps)))
     return pd.DataFrame(rows)
 
@@ -115,9 +57,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     cli.add_argument("--predictors", nargs="+", default=["value", "curve"])
     cli.add_argument("--margins", nargs="+", type=float, default=[0.0, 0.05, 0.1, 0.2])
     cli.add_argument("--checkpoints", nargs="+", type=float, default=[0.2, 0.35, 0.5])
+    cli.add_argument("--first", type=int, default=None,
+                     help="replay each run's first N robots only (default: all)")
     cli.add_argument("--out", type=Path, default=None, help="Markdown file for the table")
     args = cli.parse_args(argv)
-    table = calibrate(args.runs, args.predictors, args.margins, args.checkpoints)
+    table = calibrate(args.runs, args.predictors, args.margins, args.checkpoints, args.first)
     if not table["offspring"].any():
         print(f"error: no offspring to replay in {' '.join(map(str, args.runs))}: a run has "
               "offspring only after its first population_size robots", file=sys.stderr)

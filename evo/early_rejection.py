@@ -17,7 +17,12 @@ episodes):
 * ``curve``: ``a − b·exp(−c·τ)`` (``τ = env_steps / budget``) fitted to the prefix and
   evaluated at ``τ = 1``;
 * ``slope``: Theil–Sen slope of the second half of the prefix (per 1,000 env steps; not
-  on the return scale, so no rule uses it alone).
+  on the return scale, so no rule uses it alone);
+* ``rate``: the return of an episode that ran the task's ``t_max`` control steps at the
+  reward rate of the last ``last`` batches (their summed ``train/reward/<term>`` means
+  per env step, recorded for every batch). It needs no finished episode: where episodes
+  run to ``t_max`` (the robots a rule stops) it is their return at that rate, and where
+  they end early in success it overstates it, so it errs towards training on.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,30 +49,53 @@ whole budget to saturated within its first percent."""
 # ---------------------------------------------------------------- one robot's curve
 
 
+_EMPTY = np.zeros(0)
+
+
 @dataclass(frozen=True)
 class Curve:
-    """One robot's informative batches (those that completed episodes), in step order."""
+    """One robot's informative batches (those that completed episodes), in step order,
+    and the reward rate of every batch.
+
+    Attributes:
+        steps: Env steps at each informative batch.
+        returns: Mean return of the episodes that ended in it.
+        episodes: How many ended in it.
+        rate_steps: Env steps at every batch (informative or not).
+        rates: Reward per env step of every batch, all terms summed (empty for a
+            curve recorded without its ``train/reward/<term>`` columns).
+    """
 
     steps: NDArray[np.float64]
     returns: NDArray[np.float64]
     episodes: NDArray[np.float64]
+    rate_steps: NDArray[np.float64] = field(default_factory=lambda: _EMPTY)
+    rates: NDArray[np.float64] = field(default_factory=lambda: _EMPTY)
 
     @classmethod
     def from_rows(cls, rows: pd.DataFrame) -> Curve:
-        """Build from one robot's rows of a curves table, dropping uninformative batches."""
+        """Build from one robot's rows of a curves table: its informative batches, and
+        every batch's reward rate where the table has the reward terms."""
+        rows = rows.sort_values("env_steps")
         done = rows[(rows["train/episodes"] > 0) & np.isfinite(rows["train/mean_return"])]
-        done = done.sort_values("env_steps")
+        terms = [c for c in rows.columns if str(c).startswith("train/reward/")]
+        rated = rows.dropna(subset=terms) if terms else rows.iloc[:0]
         return cls(done["env_steps"].to_numpy(dtype=float),
                    done["train/mean_return"].to_numpy(dtype=float),
-                   done["train/episodes"].to_numpy(dtype=float))
+                   done["train/episodes"].to_numpy(dtype=float),
+                   rated["env_steps"].to_numpy(dtype=float),
+                   rated[terms].sum(axis=1).to_numpy(dtype=float) if terms else _EMPTY)
 
     def select(self, mask: NDArray[np.bool_]) -> Curve:
-        """The batches where ``mask`` holds."""
-        return Curve(self.steps[mask], self.returns[mask], self.episodes[mask])
+        """The informative batches where ``mask`` holds (the reward rates as they are)."""
+        return Curve(self.steps[mask], self.returns[mask], self.episodes[mask],
+                     self.rate_steps, self.rates)
 
     def prefix(self, cut: float) -> Curve:
         """The batches at or before ``cut`` env steps."""
-        return self.select(self.steps <= cut)
+        done, rated = self.steps <= cut, self.rate_steps <= cut
+        return Curve(self.steps[done], self.returns[done], self.episodes[done],
+                     self.rate_steps[rated], self.rates[rated])
 
     def after(self, cut: float) -> Curve:
         """The batches after ``cut`` env steps."""
@@ -83,6 +111,14 @@ class Curve:
 def value_at_cut(prefix: Curve, last: int = 3) -> float:
     """Episode-weighted mean return of the last ``last`` batches of ``prefix``."""
     return prefix.select(np.arange(len(prefix.steps)) >= len(prefix.steps) - last).episode_mean()
+
+
+def rate_at_cut(prefix: Curve, t_max: int, last: int = 3) -> float:
+    """``t_max`` times the mean reward per env step of the last ``last`` batches of
+    ``prefix``: the return of a ``t_max``-step episode at that rate (NaN without rates)."""
+    if len(prefix.rates) == 0:
+        return np.nan
+    return float(t_max * prefix.rates[-last:].mean())
 
 
 def late_slope(prefix: Curve, cut: float) -> float:
@@ -173,7 +209,7 @@ def saturating_extrapolation(prefix: Curve, budget: float, fallback: float) -> f
 
 # ---------------------------------------------------------------- the rule
 
-PREDICTORS = ("value", "area", "curve")
+PREDICTORS = ("value", "area", "curve", "rate")
 """Predictors on the return scale, which a rule can compare with a fitness."""
 
 
@@ -187,10 +223,12 @@ class EarlyRejection:
             (calibrated in docs/results/early_rejection/: earlier cuts stop offspring
             that would have entered the population).
         predictor: How the final fitness is predicted from the curve so far: ``value``,
-            ``area`` or ``curve`` (see the module docstring).
+            ``area``, ``curve`` (these three wait for finished episodes) or ``rate``
+            (from the first batch on; see the module docstring).
         margin: Fitness units: stop when ``prediction + margin`` is below the population
             minimum the offspring has to beat (larger: fewer wrong rejections).
-        last: Informative batches the ``value`` predictor averages.
+        last: Batches the ``value`` predictor (informative ones) and the ``rate``
+            predictor (any) average.
     """
 
     enabled: bool = False
@@ -213,14 +251,21 @@ class EarlyRejection:
 
 
 def predict(curve: Curve, budget: float, fraction: float, predictor: str,
-            last: int = 3) -> float:
-    """The predicted final fitness of a curve cut at ``fraction`` of ``budget``.
+            last: int = 3, t_max: int | None = None) -> float:
+    """The predicted final fitness of a curve cut at ``fraction`` of ``budget``
+    (``t_max``: the task's episode length, which the ``rate`` predictor needs).
 
     Returns:
-        The prediction; NaN when no episode ended before the cut.
+        The prediction; NaN when no episode ended before the cut (``rate``: when no
+        batch with reward terms came before it).
     """
     cut = fraction * budget
     prefix = curve.prefix(cut)
+    if predictor == "rate":
+        if t_max is None:
+            raise ValueError("the rate predictor needs the task's t_max (control steps "
+                             "per episode)")
+        return rate_at_cut(prefix, t_max, last)
     value = value_at_cut(prefix, last)
     if predictor == "value":
         return value
@@ -252,11 +297,12 @@ class StoppingRule:
         threshold: The population minimum when it was bred, or a function giving the
             current one (an executor that shares the run directory can see the
             population improve while the offspring trains); NaN means nothing to beat.
+        t_max: The task's control steps per episode (the ``rate`` predictor's).
     """
 
     def __init__(self, config: EarlyRejection, budget: int,
-                 threshold: float | Callable[[], float]) -> None:
-        self.config, self.budget = config, budget
+                 threshold: float | Callable[[], float], t_max: int | None = None) -> None:
+        self.config, self.budget, self.t_max = config, budget, t_max
         self.threshold = threshold if callable(threshold) else (lambda: threshold)
         self.rows: list[Mapping[str, float]] = []
         self.pending = list(config.checkpoints)
@@ -270,7 +316,7 @@ class StoppingRule:
             threshold = float(self.threshold())
             curve = Curve.from_rows(pd.DataFrame(self.rows))
             predicted = predict(curve, self.budget, fraction, self.config.predictor,
-                                self.config.last)
+                                self.config.last, self.t_max)
             stop = bool(np.isfinite(threshold) and np.isfinite(predicted)
                         and predicted + self.config.margin < threshold)
             self.verdicts.append(Verdict(fraction, predicted, threshold, stop))
@@ -285,11 +331,11 @@ class StoppingRule:
 
 
 def replay_rule(config: EarlyRejection, curve: Curve, budget: float,
-                threshold: float) -> Verdict | None:
+                threshold: float, t_max: int | None = None) -> Verdict | None:
     """The checkpoint at which the rule would have stopped a fully trained curve, or
     None (for calibrating the rule offline on recorded runs)."""
     for fraction in config.checkpoints:
-        predicted = predict(curve, budget, fraction, config.predictor, config.last)
+        predicted = predict(curve, budget, fraction, config.predictor, config.last, t_max)
         if np.isfinite(threshold) and np.isfinite(predicted) and (
                 predicted + config.margin < threshold):
             return Verdict(fraction, predicted, threshold, True)

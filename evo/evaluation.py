@@ -230,7 +230,7 @@ def _train_and_record(robot: Robot, candidate: Candidate, job: Job, learner: Lea
         "method": job.method, "birth": candidate.birth, "budget": candidate.budget,
         "parents": list(candidate.parents), "replay_seed": candidate.seed,
     }
-    rule = (StoppingRule(job.early, candidate.budget, candidate.threshold)
+    rule = (StoppingRule(job.early, candidate.budget, candidate.threshold, job.env.task.t_max)
             if job.early.enabled and math.isfinite(candidate.threshold) else None)
     with ExitStack() as stack:
         with critical():  # a signal here waits until the recorder is on the stack

@@ -98,6 +98,37 @@ def test_every_predictor_predicts_on_the_return_scale(predictor: str) -> None:
     assert math.isnan(predict(curve, 10_000, 0.01, predictor)), "no episode before the cut"
 
 
+def rated(rate: float, batches: int = 20, budget: int = 10_000) -> list[dict[str, float]]:
+    """A curve in which no episode ends (long episodes) and every batch earns ``rate``
+    per env step, split over two reward terms."""
+    return [{**row, "train/episodes": 0.0, "train/mean_return": math.nan,
+             "train/reward/time": -0.001, "train/reward/approach": rate + 0.001}
+            for row in rows([0.0] * batches, budget)]
+
+
+def test_the_rate_predictor_needs_no_finished_episode() -> None:
+    curve = Curve.from_rows(pd.DataFrame(rated(-0.0009)))
+    assert math.isnan(predict(curve, 10_000, 0.3, "value")), "value waits for an episode"
+    assert predict(curve, 10_000, 0.3, "rate", t_max=1000) == pytest.approx(-0.9)
+    with pytest.raises(ValueError, match="needs the task's t_max"):
+        predict(curve, 10_000, 0.3, "rate")
+    rule = StoppingRule(dataclasses.replace(RULE, predictor="rate"), 10_000, threshold=-0.5,
+                        t_max=1000)
+    stopped_at = next(i for i, row in enumerate(rated(-0.0009)) if rule(row))
+    assert rated(-0.0009)[stopped_at]["env_steps"] == 2_000, "stopped at the first checkpoint"
+    spared = StoppingRule(dataclasses.replace(RULE, predictor="rate"), 10_000, threshold=-0.5,
+                          t_max=1000)
+    assert not any(spared(row) for row in rated(0.0002)), "a rate of +0.2 an episode beats it"
+
+
+def test_the_rate_reads_the_last_batches_before_the_cut() -> None:
+    table = pd.DataFrame(rated(-0.001)[:10] + rated(0.001)[10:])  # a jump half-way
+    curve = Curve.from_rows(table)
+    assert predict(curve, 10_000, 0.45, "rate", last=3, t_max=100) == pytest.approx(-0.1)
+    assert predict(curve, 10_000, 0.65, "rate", last=3, t_max=100) == pytest.approx(0.1)
+    assert predict(curve, 10_000, 0.55, "rate", last=2, t_max=100) == pytest.approx(0.0)
+
+
 @pytest.mark.parametrize(("change", "message"), [
     (dict(checkpoints=(0.5, 1.5)), "checkpoints must be fractions"),
     (dict(checkpoints=(0.5, 0.2)), "checkpoints must rise"),
@@ -122,11 +153,13 @@ def real_candidate(threshold: float) -> Candidate:
                 threshold)
 
 
-@pytest.mark.parametrize(("threshold", "stops"), [(5.0, True), (-10.0, False)])
+@pytest.mark.parametrize(("threshold", "stops", "predictor"), [
+    (5.0, True, "value"), (-10.0, False, "value"), (5.0, True, "rate")])
 def test_a_real_training_stops_only_when_it_cannot_win(
-    tmp_path: Path, threshold: float, stops: bool
+    tmp_path: Path, threshold: float, stops: bool, predictor: str
 ) -> None:
-    job = Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path), early=RULE)
+    rule = dataclasses.replace(RULE, predictor=predictor)
+    job = Job(PhysicsParams(), NEAR, TINY_LEARNER, str(tmp_path), early=rule)
     outcome = evaluate(real_candidate(threshold), job)
     assert outcome.error is None, outcome.error
     assert outcome.stopped_early is stops
@@ -251,10 +284,8 @@ def test_the_report_and_the_early_slope_study_leave_stopped_robots_out_and_say_s
 
 @pytest.mark.slow
 def test_the_offline_replay_makes_the_decisions_the_run_made(early_reference: Path) -> None:
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-    from early_rejection import replay
-
     from analysis.load import load_runs
+    from analysis.rejection import replay
 
     runs = load_runs([early_reference])
     rule = EarlyRejection(enabled=True, checkpoints=(0.3,), margin=0.0)
