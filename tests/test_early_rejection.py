@@ -322,6 +322,9 @@ def test_the_equal_cost_report_counts_what_the_run_with_the_rule_saved_and_kept(
     assert table.loc["with", "stopped_early"] >= 2
     report = (tmp_path / "equal_cost.md").read_text()
     assert "## At equal cost" in report and "Mann–Whitney" in report
+    # the run without reaches its own final best by its end, at a ratio of at most 1
+    section = report.split("## Env steps to the final best")[1].split("##")[0]
+    assert f"| {summary['best_fitness']:.3f} | {table.loc['without', 'env_steps']} |" in section
     assert (tmp_path / "equal_cost.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
@@ -50,6 +51,34 @@ def at_env_steps(trace: pd.DataFrame, run: str, env_steps: float) -> tuple[pd.Se
     rows = trace[trace["run"] == run]
     within = rows[rows["env_steps"] <= env_steps]
     return (within.iloc[-1], len(within)) if len(within) else (rows.iloc[0], 1)
+
+
+def _first_reaching(trace: pd.DataFrame, run: str, target: float) -> float:
+    """Cumulative env steps at the first row of ``run`` whose best reaches ``target``."""
+    mine = trace[trace["run"] == run]
+    reached = mine[mine["best"] >= target]
+    return float(reached["env_steps"].iloc[0]) if len(reached) else np.nan
+
+
+def steps_to_target(trace: pd.DataFrame) -> pd.DataFrame:
+    """Per seed with a run of each arm: the env steps each needed to reach the final
+    best fitness of the run without the change (NaN if never), and as a share of what
+    the run without spent in all."""
+    ends = trace.groupby("run").tail(1).set_index(["seed", "arm"])
+    rows = []
+    for seed in sorted(ends.index.get_level_values("seed").unique()):
+        if not all((seed, m) in ends.index for m in ARMS):
+            continue
+        w, wo = ends.loc[(seed, "with")], ends.loc[(seed, "without")]
+        target, total = float(wo["best"]), float(wo["env_steps"])
+        with_steps = _first_reaching(trace, str(w["run"]), target)
+        without_steps = _first_reaching(trace, str(wo["run"]), target)
+        rows.append(dict(seed=int(seed), target=target, without_total=int(total),
+                         with_total=int(w["env_steps"]), reached=not np.isnan(with_steps),
+                         with_steps_to_target=with_steps, with_ratio=with_steps / total,
+                         without_steps_to_target=without_steps,
+                         without_ratio=without_steps / total))
+    return pd.DataFrame(rows)
 
 
 def equal_cost_table(trace: pd.DataFrame, cost: float | Mapping[int, float]) -> pd.DataFrame:

@@ -41,7 +41,7 @@ import scipy.stats
 
 from analysis.cli import report_folder, run_report
 from analysis.equal_cost import ARMS as SIDES
-from analysis.equal_cost import equal_cost_table, plot_equal_cost
+from analysis.equal_cost import equal_cost_table, plot_equal_cost, steps_to_target
 from analysis.load import Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table
 from analysis.population import cost_trace, final_population, population_trace
@@ -182,6 +182,9 @@ class Comparison:
     population: dict[str, float]
     env_steps: dict[str, float]
     """Per side, the mean env steps of its complete runs."""
+    targets: pd.DataFrame
+    """Per seed, the env steps each run needed to reach the final best fitness of the
+    run without the rule (:func:`analysis.equal_cost.steps_to_target`)."""
 
 
 @dataclass(frozen=True)
@@ -223,7 +226,8 @@ def early_rejection_tables(sides: dict[str, Runs]) -> EarlyRejectionTables:
         comparison_table(done), table[list(EQUAL_COST)].rename(columns={"E": "env_steps"}),
         parting_table(complete["without"], complete["with"]),
         population_test(complete["without"], complete["with"]),
-        {side: done.loc[done["side"] == side, "env_steps"].mean() for side in SIDES})
+        {side: done.loc[done["side"] == side, "env_steps"].mean() for side in SIDES},
+        steps_to_target(trace[kept]))
     return EarlyRejectionTables(sides, trace, per_run, comparison)
 
 
@@ -272,6 +276,15 @@ def _comparison_markdown(c: Comparison) -> list[str]:
         "(and the robots it had evaluated by then), beside the run with the rule at its "
         "end.\n",
         markdown_table(c.equal_cost),
+        "## Env steps to the final best of the run without the rule\n",
+        "`target`: the run without the rule's final best fitness; `*_steps_to_target`: the "
+        "cumulative env steps at which each run's best so far first reached it; "
+        "`*_ratio`: those as a share of what the run without spent in all "
+        "(`without_total`); empty where the run with the rule never reached it."
+        + (f" Median `with_ratio` over the seeds that reached it: "
+           f"{fmt_number(c.targets['with_ratio'].median(), 2)}."
+           if c.targets["reached"].any() else "") + "\n",
+        markdown_table(c.targets),
         "## Where the paired runs part\n",
         "`same_first_births`: births at which both runs evaluated the same robot before "
         "they first differ; `first_stop`: the first birth the rule stopped. Where the runs "

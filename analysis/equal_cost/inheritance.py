@@ -53,7 +53,7 @@ import pandas as pd
 import scipy.stats
 
 from analysis.cli import parser, report_folder, run_report
-from analysis.equal_cost import equal_cost_table, plot_equal_cost
+from analysis.equal_cost import equal_cost_table, plot_equal_cost, steps_to_target
 from analysis.load import (
     PathsLike,
     RunDirectoryError,
@@ -299,34 +299,6 @@ def differences_table(paired: pd.DataFrame, resampling: Resampling) -> pd.DataFr
         rows.append(dict(difference=label, column=column, seeds=len(d), mean=t.estimate,
                          t_low=t.ci_low, t_high=t.ci_high, t_p=t.p, boot_low=boot[0],
                          boot_high=boot[1]))
-    return pd.DataFrame(rows)
-
-
-def _first_reaching(trace: pd.DataFrame, run: str, target: float) -> float:
-    """Cumulative env steps at the first row of ``run`` whose best reaches ``target``."""
-    mine = trace[trace["run"] == run]
-    reached = mine[mine["best"] >= target]
-    return float(reached["env_steps"].iloc[0]) if len(reached) else np.nan
-
-
-def steps_to_target(trace: pd.DataFrame) -> pd.DataFrame:
-    """Per seed with both runs: the env steps each needed to reach the final best
-    fitness of the run without inheritance (NaN if never), and as a share of what the
-    run without spent in all."""
-    ends = trace.groupby("run").tail(1).set_index(["seed", "arm"])
-    rows = []
-    for seed in sorted(ends.index.get_level_values("seed").unique()):
-        if not all((seed, m) in ends.index for m in METHODS):
-            continue
-        w, wo = ends.loc[(seed, WITH)], ends.loc[(seed, WITHOUT)]
-        target, total = float(wo["best"]), float(wo["env_steps"])
-        with_steps = _first_reaching(trace, str(w["run"]), target)
-        without_steps = _first_reaching(trace, str(wo["run"]), target)
-        rows.append(dict(seed=int(seed), target=target, without_total=int(total),
-                         with_total=int(w["env_steps"]), reached=not np.isnan(with_steps),
-                         with_steps_to_target=with_steps, with_ratio=with_steps / total,
-                         without_steps_to_target=without_steps,
-                         without_ratio=without_steps / total))
     return pd.DataFrame(rows)
 
 
