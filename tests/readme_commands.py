@@ -280,6 +280,15 @@ EXCLUDED: dict[str, str] = {
         "reads the runs' learning curves (their recordings, not committed: the committed "
         "copies keep history, summary and population)",
     "docs/results/early_rejection/run.sh": "six +exp=paper_clean runs (about 4 hours)",
+    "bash docs/results/early_rejection/steady_rate.sh":
+        "replays 20 rules on 18 committed runs (minutes); tests/test_rejection.py replays "
+        "the rule on two of them through analysis.rejection, which the script's "
+        "bench/early_rejection.py calls",
+    "python -m analysis.rejection docs/results/ablation/runs/E+L_seed{0..12} "
+    "docs/results/ablation/runs/E+L+I_seed{0..4} --first 60 --checkpoints 0.4 --margin 0.6 "
+    "--out docs/results/early_rejection/bias":
+        "reads 18 committed runs' curves and bodies (a minute); tests/test_rejection.py runs "
+        "the same command on two of them and checks what it writes",
     "python -m analysis.equal_cost --without runs/paper_clean --with runs/paper_clean_early "
     "--out docs/results/early_rejection": "reads the six runs run.sh makes (hours); their "
                                           "committed copies keep no config.yaml, which "
