@@ -75,12 +75,15 @@ DEFAULT_POPULATION = 20
 EXTRA_ROBOT_COLUMNS: tuple[str, ...] = (
     "scheduled_budget", "operator", "replaced", "episodes", "wall_seconds", "error",
     "eval_seed", "status", "predicted", "curve_source", "inherited_from",
+    "eval_success_rate", "eval_mean_return",
 )
 """``status``: ``trained``, ``stopped-early`` (early rejection: its fitness covers part of
 its budget) or ``failed``, from history.csv (derived from ``error`` for runs recorded
 before the column existed); ``predicted``: the rule's prediction for a stopped robot;
 ``inherited_from``: the parent whose policy its training started from (``ga.inheritance``;
-"" for none and in runs recorded before the column existed)."""
+"" for none and in runs recorded before the column existed); ``eval_success_rate`` and
+``eval_mean_return``: the deterministic (mean action) evaluation of the policy its
+training handed back (``learner.eval_interval``; NaN without one)."""
 RUN_COLUMNS: tuple[str, ...] = (
     "run", "method", "seed", "population_size", "robots", "complete", "status",
     "curves_mcap", "curves_csv", "curves_missing", "path",
@@ -360,6 +363,8 @@ def robots_of_run(run: str, method: str, seed: int, history: pd.DataFrame) -> pd
             text("error") != "", "failed", "trained")),
         "predicted": number("predicted"),
         "inherited_from": text("inherited_from"),
+        "eval_success_rate": number("eval_success_rate"),
+        "eval_mean_return": number("eval_mean_return"),
     })
     return table.sort_values("birth").reset_index(drop=True)
 

@@ -180,3 +180,13 @@ def test_a_runs_history_carries_the_deterministic_evaluation_beside_the_fitness(
     history = read_history(run_dir / "history.csv")
     assert history["eval_success_rate"].between(0, 1).all(), history
     assert history["eval_mean_return"].notna().all()
+    # analysis reads both: the robots table carries them and the report shows them
+    from analysis.ablation.report import deployed_table
+    from analysis.load import load_runs
+
+    robots = load_runs([run_dir]).robots
+    assert robots["eval_success_rate"].tolist() == history["eval_success_rate"].tolist()
+    (row,) = deployed_table(robots).itertuples()
+    assert row.evaluated == len(history)
+    assert row.eval_success_rate == pytest.approx(history["eval_success_rate"].mean())
+    assert row.fitness == pytest.approx(history["fitness"].mean())

@@ -354,6 +354,14 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
               "Estimates with bootstrap 95 % CIs; `unit` is the resampling unit (the robot, "
               "or the whole GA run for an evolved method with several seeds).\n\n",
               markdown_table(t.main)]
+    deployed = deployed_table(runs.robots)
+    if not deployed.empty:
+        parts += ["\n### The deployed controller\n\n",
+                  "Per method, over the robots whose training ran periodic deterministic "
+                  "evaluations (`learner.eval_interval`): the fitness (Eq. 8, earned with "
+                  "the policy's noise) beside the handed-back policy's deterministic "
+                  "success and return (its mean action, as it is deployed and replayed).\n\n",
+                  markdown_table(deployed)]
     parts += ["\n## Tests\n", tests_markdown("robots", t.kruskal, t.pairwise)]
     if t.per_run is not None:
         parts.append(tests_markdown("per-run means", *t.per_run))
@@ -378,6 +386,21 @@ def ablation_markdown(runs: Runs, tables: AblationTables, figures: dict[str, Pat
     for stem, path in figures.items():
         parts.append(f"\n### {_caption(stem)}\n\n" + figure_link(path, out, stem))
     return "".join(parts)
+
+
+def deployed_table(robots: pd.DataFrame) -> pd.DataFrame:
+    """Per method with deterministic evaluations: robots evaluated, and the mean
+    fitness, deterministic success rate and deterministic return over them (empty when
+    no robot has one)."""
+    rated = robots[np.isfinite(robots["eval_success_rate"].to_numpy(float))]
+    if rated.empty:
+        return pd.DataFrame()
+    grouped = rated.groupby("method", sort=False)
+    return pd.DataFrame(dict(
+        evaluated=grouped.size(), fitness=grouped["fitness"].mean(),
+        eval_success_rate=grouped["eval_success_rate"].mean(),
+        eval_mean_return=grouped["eval_mean_return"].mean(),
+    )).rename_axis("method").reset_index()
 
 
 def method_ranking(summary: pd.DataFrame, statistic: str) -> str:
