@@ -352,3 +352,23 @@ def test_the_paired_runs_part_where_their_robots_first_differ() -> None:
     with_ = runs(["a", "b", "x", "y"], ["trained", "stopped-early", "trained", "trained"])
     (row,) = parting_table(without, with_).to_dict("records")
     assert row == dict(seed=0, same_first_births=2, first_stop=1)
+
+
+@pytest.mark.slow
+def test_the_equal_cost_report_over_each_runs_first_robots_counts_only_those(
+    early_reference: Path, serial_reference: Path, tmp_path: Path
+) -> None:
+    """``--first N`` compares the runs over their first N robots: each side counts N
+    robots, and its env steps are what those robots were trained for."""
+    from analysis.equal_cost.early_rejection import main
+
+    first = 4
+    assert main(["--without", str(serial_reference), "--with", str(early_reference),
+                 "--out", str(tmp_path), "--first", str(first)]) == 0
+    table = pd.read_csv(tmp_path / "equal_cost_runs.csv").set_index("side")
+    for side, run_dir in (("with", early_reference), ("without", serial_reference)):
+        history = pd.read_csv(run_dir / "history.csv")
+        assert len(history) > first, run_dir
+        assert table.loc[side, "robots"] == first
+        assert table.loc[side, "env_steps"] == history.nsmallest(first, "birth")[
+            "env_steps"].sum()

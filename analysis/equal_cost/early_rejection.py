@@ -2,10 +2,11 @@
 (a use of the comparison of :mod:`analysis.equal_cost`).
 
     python -m analysis.equal_cost --without runs/paper_clean --with runs/paper_clean_early \\
-        --out docs/results/early_rejection
+        --out docs/results/early_rejection [--first N]
 
 Each side is a set of run directories (or folders holding them), one per GA seed; runs
-of the two sides with the same seed are paired (they share their initial population).
+of the two sides with the same seed are paired (they share their initial population); ``--first N`` compares each run's first N robots
+only, so that runs of different lengths compare over the same births.
 It writes ``OUT/equal_cost.md`` with ``equal_cost.png`` and ``equal_cost_runs.csv``:
 
 * per run: robots, stopped-early offspring, total env steps, env steps saved (what the
@@ -232,11 +233,13 @@ def early_rejection_tables(sides: dict[str, Runs]) -> EarlyRejectionTables:
 
 
 def write_equal_cost(without_paths: Sequence[Path], with_paths: Sequence[Path],
-                     out: str | Path) -> Path:
-    """Load both sides, write ``out/equal_cost.md`` with its figure and CSV, return it."""
+                     out: str | Path, first: int | None = None) -> Path:
+    """Load both sides, write ``out/equal_cost.md`` with its figure and CSV, return it.
+    ``first`` keeps each run's first ``first`` robots (:func:`analysis.load.load_runs`),
+    so that longer runs without the rule compare over the robots the runs with it had."""
     out = report_folder(out)
-    tables = early_rejection_tables({"without": load_runs(without_paths),
-                                     "with": load_runs(with_paths)})
+    tables = early_rejection_tables({"without": load_runs(without_paths, first),
+                                     "with": load_runs(with_paths, first)})
     tables.runs.to_csv(out / "equal_cost_runs.csv", index=False)
     figure = out / "equal_cost.png"
     plot_equal_cost(tables.trace, legend="{} early rejection", path=figure)
@@ -311,8 +314,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     cli.add_argument("--with", dest="with_", nargs="+", type=Path, required=True,
                      help="run directories with the rule (or folders holding them)")
     cli.add_argument("--out", type=Path, required=True, help="report folder (created)")
+    cli.add_argument("--first", type=int, default=None, metavar="N",
+                     help="keep each run's first N robots (births below N), to compare "
+                          "longer runs over the robots the shorter ones had")
     args = cli.parse_args(argv)
-    return run_report(lambda: write_equal_cost(args.without, args.with_, args.out))
+    return run_report(lambda: write_equal_cost(args.without, args.with_, args.out,
+                                               args.first))
 
 
 if __name__ == "__main__":
