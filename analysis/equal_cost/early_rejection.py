@@ -5,8 +5,9 @@
         --out docs/results/early_rejection [--first N]
 
 Each side is a set of run directories (or folders holding them), one per GA seed; runs
-of the two sides with the same seed are paired (they share their initial population); ``--first N`` compares each run's first N robots
-only, so that runs of different lengths compare over the same births.
+of the two sides with the same seed are paired (they share their initial population);
+``--first N`` compares each run's first N robots only, so that runs of different lengths
+compare over the same births.
 It writes ``OUT/equal_cost.md`` with ``equal_cost.png`` and ``equal_cost_runs.csv``:
 
 * per run: robots, stopped-early offspring, total env steps, env steps saved (what the
