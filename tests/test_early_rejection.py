@@ -354,6 +354,37 @@ def test_the_paired_runs_part_where_their_robots_first_differ() -> None:
     assert row == dict(seed=0, same_first_births=2, first_stop=1)
 
 
+def test_a_stop_is_judged_by_the_paired_full_training_up_to_the_first_wrong_one() -> None:
+    """Offspring stopped with the rule are judged by the run without it, which trained
+    the same robot at the same birth in full: a stop of an offspring it rejected is
+    right, one it accepted is wrong, and nothing after the first wrong stop (where the
+    populations part) or after the runs' robots differ is judged."""
+    from analysis.equal_cost.early_rejection import stopped_against_full, wilson
+    from analysis.load import Runs
+
+    def runs(names: str, status: list[str], accepted: str) -> Runs:
+        robots = pd.DataFrame(dict(
+            seed=0, birth=range(len(names)), name=list(names), status=status,
+            operator=["random"] * 2 + ["mutation"] * (len(names) - 2),
+            accepted=[c == "1" for c in accepted]))
+        return Runs(robots, pd.DataFrame(), pd.DataFrame())
+
+    trained, stopped = "trained", "stopped-early"
+    #              initial  a: right stop  b: accepted  c: wrong stop  d: after it
+    without = runs("ijabcde", [trained] * 7, "1101111")
+    with_ = runs("ijabcdx", [trained, trained, stopped, trained, stopped, stopped,
+                             trained], "1100000")
+    (row,) = stopped_against_full(without, with_).to_dict("records")
+    assert row == dict(seed=0, births=3, accepted=2, stopped=2, wrongly_stopped=1)
+
+    parted = runs("ijaXcde", [trained, trained, stopped] + [trained] * 4, "1100000")
+    (row,) = stopped_against_full(without, parted).to_dict("records")
+    assert row == dict(seed=0, births=1, accepted=0, stopped=1, wrongly_stopped=0)
+
+    rate, low, high = wilson(1, 20)
+    assert rate == 0.05 and 0 < low < 0.05 < high < 0.3
+
+
 @pytest.mark.slow
 def test_the_equal_cost_report_over_each_runs_first_robots_counts_only_those(
     early_reference: Path, serial_reference: Path, tmp_path: Path

@@ -129,6 +129,50 @@ def parting_table(without: Runs, with_: Runs) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def stopped_against_full(without: Runs, with_: Runs) -> pd.DataFrame:
+    """Per seed: the offspring the rule stopped, judged by the paired run's full training.
+
+    A serial run with the rule is the run without it for as long as the rule stops only
+    offspring full training rejects (a rejected offspring leaves the population as it
+    was): until then the run without the rule trained the same robot at the same birth
+    in full, and its ``accepted`` says whether the stop was wrong. The first wrong stop
+    changes the population, so births after it are not compared; nor are births after
+    the two runs first evaluated different robots. ``births``: the offspring births
+    compared; ``accepted``: those full training accepted; ``wrongly_stopped``: stopped
+    with the rule, accepted without it.
+    """
+    rows = []
+    for seed, mine in with_.robots.groupby("seed"):
+        theirs = without.robots[without.robots["seed"] == seed].set_index("birth")
+        if theirs.empty:
+            continue
+        compared, wrong, accepted, stopped = 0, 0, 0, 0
+        for row in mine.sort_values("birth").itertuples():
+            if row.birth not in theirs.index or theirs.at[row.birth, "name"] != row.name:
+                break
+            if row.operator == "random":  # the initial population: nothing to stop
+                continue
+            full = bool(theirs.at[row.birth, "accepted"])
+            compared, accepted = compared + 1, accepted + full
+            if row.status == STOPPED:
+                stopped += 1
+                wrong += full
+                if full:
+                    break
+        rows.append(dict(seed=int(seed), births=compared, accepted=accepted,
+                         stopped=stopped, wrongly_stopped=wrong))
+    return pd.DataFrame(rows, columns=["seed", "births", "accepted", "stopped",
+                                       "wrongly_stopped"])
+
+
+def wilson(hits: int, trials: int) -> tuple[float, float, float]:
+    """``hits / trials`` with its Wilson 95 % interval (NaN without a trial)."""
+    if not trials:
+        return np.nan, np.nan, np.nan
+    ci = scipy.stats.binomtest(hits, trials).proportion_ci(method="wilson")
+    return hits / trials, float(ci.low), float(ci.high)
+
+
 def _cell(interval: Contrast) -> str:
     """``mean [CI]``; the mean alone where the values do not vary or are too few."""
     if interval.se > 0:
@@ -187,6 +231,9 @@ class Comparison:
     targets: pd.DataFrame
     """Per seed, the env steps each run needed to reach the final best fitness of the
     run without the rule (:func:`analysis.equal_cost.steps_to_target`)."""
+    stops: pd.DataFrame
+    """Per seed, the stopped offspring judged by the paired full training
+    (:func:`stopped_against_full`)."""
 
 
 @dataclass(frozen=True)
@@ -229,7 +276,8 @@ def early_rejection_tables(sides: dict[str, Runs]) -> EarlyRejectionTables:
         parting_table(complete["without"], complete["with"]),
         population_test(complete["without"], complete["with"]),
         {side: done.loc[done["side"] == side, "env_steps"].mean() for side in SIDES},
-        steps_to_target(trace[kept]))
+        steps_to_target(trace[kept]),
+        stopped_against_full(complete["without"], complete["with"]))
     return EarlyRejectionTables(sides, trace, per_run, comparison)
 
 
@@ -296,6 +344,15 @@ def _comparison_markdown(c: Comparison) -> list[str]:
         "per-seed difference is GA-run variance as much as the rule's doing; with "
         "`executor=serial` they part only at the first stop.\n",
         markdown_table(c.parting),
+        "## The stopped offspring against full training\n",
+        "For as long as the rule stops only offspring that full training rejects, a "
+        "serial run with it is the run without it, which trained each of those offspring "
+        "in full: its `accepted` judges the stop. `births`: offspring births compared (up "
+        "to the first wrong stop, or to where the runs first evaluated different robots); "
+        "`accepted`: those full training accepted; `wrongly_stopped`: stopped with the "
+        "rule, accepted without it.\n",
+        markdown_table(c.stops),
+        _false_rejections(c.stops),
         "## Final populations pooled\n",
         f"Mann–Whitney U = {test['u']:.1f}, p = {test['p']:.3g}, A12 (with over without) "
         f"= {test['a12']:.2f} ({a12_magnitude(test['a12'])}), "
@@ -303,6 +360,17 @@ def _comparison_markdown(c: Comparison) -> list[str]:
         "are not independent draws, so this test overstates its power; the paired "
         "per-seed test above is the conservative one.\n",
     ]
+
+
+def _false_rejections(stops: pd.DataFrame) -> str:
+    """The pooled wrongly stopped share of the accepted offspring, with its interval."""
+    wrong, accepted = int(stops["wrongly_stopped"].sum()), int(stops["accepted"].sum())
+    rate, low, high = wilson(wrong, accepted)
+    if not accepted:
+        return "No compared offspring was accepted by full training.\n"
+    return (f"Pooled: {wrong} of {accepted} offspring that full training accepted were "
+            f"stopped, {100 * rate:.1f} % [Wilson 95 %: {100 * low:.1f}, "
+            f"{100 * high:.1f}]; {int(stops['stopped'].sum())} stops compared.\n")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
