@@ -280,6 +280,9 @@ EXCLUDED: dict[str, str] = {
         "reads the runs' learning curves (their recordings, not committed: the committed "
         "copies keep history, summary and population)",
     "docs/results/early_rejection/run.sh": "six +exp=paper_clean runs (about 4 hours)",
+    "bash docs/results/early_rejection/steady_runs.sh":
+        "20 evolution runs of 60 robots in +exp=ablation's regime (about 2 h 15 min); "
+        "tests/test_early_rejection.py runs the rule in a real evolution",
     "bash docs/results/early_rejection/steady_rate.sh":
         "replays 20 rules on 18 committed runs (minutes); tests/test_rejection.py replays "
         "the rule on two of them through analysis.rejection, which the script's "
@@ -410,6 +413,7 @@ THROUGHPUT = ("env.task.t_max=50 --steps 256 --robots robots/four_wheeler.json "
 SMALL_THROUGHPUT = f"learner.num_envs=16 learner.minibatch_size=128 {THROUGHPUT}"
 ANALYSIS = "analysis"
 RESULTS = "results"
+ER = "docs/results/early_rejection"
 HOW: dict[str, How] = {
     # ---- the runs the others read, made first
     "python evo/main.py +exp=smoke": How(makes_run="smoke", says="best robot:"),
@@ -513,6 +517,15 @@ HOW: dict[str, How] = {
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
     "mkdir -p runs && cp -r docs/results/noise_sweep/study runs/noise_sweep": How(
         makes=("runs/noise_sweep/*",), group=RESULTS),
+    **{f"python -m analysis.equal_cost --without {ER}/runs/ablation/{arm}_seed* --with "
+       f"{ER}/runs/ablation_early/{arm}_seed* --out {ER}/steady_runs/{arm}": How(
+           append=f"--out check/steady_{arm}", makes=(f"check/steady_{arm}/equal_cost.md",),
+           group=RESULTS) for arm in ("E+L+I", "E+L")},
+    f"python {ER}/headline.py E+L+I+rule={ER}/runs/ablation_early/E+L+I_seed{{0..4}} "
+    f"E+L={ER}/runs/ablation/E+L_seed{{0..4}} --against E+L --targets 1.05 0.9 0.8 "
+    f"--out {ER}/steady_runs/headline.md": How(
+        append="--out check/headline.md", makes=("check/headline.md",), says="Medians",
+        group=RESULTS),
     # ---- the results pages' benchmarks: variants of the benchmarks above, small
     "python bench/env_throughput.py --arenas clean locomotion push rough --num-envs 32 "
     "--nthread 1 --steps 200": How(append="--steps 10 --num-envs 4 --repeats 1 --robots "
