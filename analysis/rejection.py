@@ -32,7 +32,7 @@ import statsmodels.api as sm
 from analysis.load import Runs, load_runs, read_config
 from analysis.markdown import markdown_table
 from analysis.population import population_trace
-from analysis.stats import holm
+from analysis.stats import holm, wilson
 from evo.early_rejection import Curve, EarlyRejection, replay_rule
 from evo.robot import load_robot
 from evo.robot.tree import Robot
@@ -96,16 +96,13 @@ def score(offspring: pd.DataFrame, all_steps: float) -> Score:
     if offspring.empty:
         return Score(offspring=0)
     accepted = offspring[offspring["accepted"]]
-    false = int(accepted["stopped"].sum())
-    ci = (scipy.stats.binomtest(false, len(accepted)).proportion_ci(method="wilson")
-          if len(accepted) else None)
+    rate, low, high = wilson(int(accepted["stopped"].sum()), len(accepted))
     rejected = offspring[~offspring["accepted"]]
     saved = float(((1 - rejected["fraction"]) * rejected["budget"]).sum())
     lost = float(((1 - accepted["fraction"]) * accepted["budget"]).sum())
     return Score(
         offspring=len(offspring), accepted=len(accepted), stopped=int(offspring["stopped"].sum()),
-        false_rejections=false / len(accepted) if len(accepted) else np.nan,
-        ci_low=ci.low if ci else np.nan, ci_high=ci.high if ci else np.nan,
+        false_rejections=rate, ci_low=low, ci_high=high,
         saved=saved / max(float(rejected["budget"].sum()), 1.0),
         schedule=all_steps / max(all_steps - saved - lost, 1.0),
     )

@@ -346,6 +346,14 @@ def vargha_delaney_a12(x: ArrayLike, y: ArrayLike) -> float:
     return float((ranks[: len(a)].sum() / len(a) - (len(a) + 1) / 2) / len(b))
 
 
+def wilson(hits: int, trials: int) -> tuple[float, float, float]:
+    """``hits / trials`` with its Wilson 95 % interval (NaN without a trial)."""
+    if not trials:
+        return np.nan, np.nan, np.nan
+    ci = scipy.stats.binomtest(hits, trials).proportion_ci(method="wilson")
+    return hits / trials, float(ci.low), float(ci.high)
+
+
 def a12_magnitude(a12: float) -> str:
     """Vargha & Delaney's (2000) label for an A12: negligible, small, medium or large."""
     distance = max(a12, 1 - a12)

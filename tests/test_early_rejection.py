@@ -359,8 +359,9 @@ def test_a_stop_is_judged_by_the_paired_full_training_up_to_the_first_wrong_one(
     the same robot at the same birth in full: a stop of an offspring it rejected is
     right, one it accepted is wrong, and nothing after the first wrong stop (where the
     populations part) or after the runs' robots differ is judged."""
-    from analysis.equal_cost.early_rejection import stopped_against_full, wilson
+    from analysis.equal_cost.early_rejection import stopped_against_full
     from analysis.load import Runs
+    from analysis.stats import wilson
 
     def runs(names: str, status: list[str], accepted: str) -> Runs:
         robots = pd.DataFrame(dict(

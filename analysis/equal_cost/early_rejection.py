@@ -33,7 +33,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,7 +47,7 @@ from analysis.equal_cost import equal_cost_table, plot_equal_cost, steps_to_targ
 from analysis.load import Runs, load_runs
 from analysis.markdown import figure_link, fmt_ci, fmt_number, markdown_table
 from analysis.population import cost_trace, final_population, population_trace
-from analysis.stats import Contrast, a12_magnitude, mean_interval, vargha_delaney_a12
+from analysis.stats import Contrast, a12_magnitude, mean_interval, vargha_delaney_a12, wilson
 
 REPORT = "equal_cost.md"
 FIGURES = ("best", "pop_mean", "pop_min", "env_steps_M")
@@ -115,18 +115,28 @@ def parting_table(without: Runs, with_: Runs) -> pd.DataFrame:
     then GA-run variance as much as the rule's doing.
     """
     rows = []
-    for seed, mine in with_.robots.groupby("seed"):
-        theirs = without.robots[without.robots["seed"] == seed]
-        if theirs.empty:
-            continue
-        a = mine.sort_values("birth")["name"].to_numpy()
-        b = theirs.sort_values("birth")["name"].to_numpy()
-        n = min(len(a), len(b))
-        differ = np.flatnonzero(a[:n] != b[:n])
+    for seed, mine, theirs in _paired(without, with_):
         stops = mine.loc[mine["status"] == STOPPED, "birth"]
-        rows.append(dict(seed=int(seed), same_first_births=int(differ[0]) if len(differ) else n,
+        rows.append(dict(seed=int(seed), same_first_births=_same_first_births(mine, theirs),
                          first_stop=int(stops.min()) if len(stops) else np.nan))
     return pd.DataFrame(rows)
+
+
+def _paired(without: Runs, with_: Runs) -> Iterator[tuple[int, pd.DataFrame, pd.DataFrame]]:
+    """Per seed with a run on both sides: the seed, the robots with the rule and those
+    without it, each in birth order."""
+    for seed, mine in with_.robots.groupby("seed"):
+        theirs = without.robots[without.robots["seed"] == seed]
+        if not theirs.empty:
+            yield int(seed), mine.sort_values("birth"), theirs.sort_values("birth")
+
+
+def _same_first_births(mine: pd.DataFrame, theirs: pd.DataFrame) -> int:
+    """How many first births (in birth order) two runs share the same robot at."""
+    a, b = mine["name"].to_numpy(), theirs["name"].to_numpy()
+    n = min(len(a), len(b))
+    differ = np.flatnonzero(a[:n] != b[:n])
+    return int(differ[0]) if len(differ) else n
 
 
 def stopped_against_full(without: Runs, with_: Runs) -> pd.DataFrame:
@@ -142,35 +152,24 @@ def stopped_against_full(without: Runs, with_: Runs) -> pd.DataFrame:
     with the rule, accepted without it.
     """
     rows = []
-    for seed, mine in with_.robots.groupby("seed"):
-        theirs = without.robots[without.robots["seed"] == seed].set_index("birth")
-        if theirs.empty:
-            continue
+    for seed, mine, theirs in _paired(without, with_):
+        shared = _same_first_births(mine, theirs)
+        full_training = theirs["accepted"].to_numpy(bool)
         compared, wrong, accepted, stopped = 0, 0, 0, 0
-        for row in mine.sort_values("birth").itertuples():
-            if row.birth not in theirs.index or theirs.at[row.birth, "name"] != row.name:
-                break
+        for at, row in enumerate(mine.iloc[:shared].itertuples()):
             if row.operator == "random":  # the initial population: nothing to stop
                 continue
-            full = bool(theirs.at[row.birth, "accepted"])
+            full = bool(full_training[at])
             compared, accepted = compared + 1, accepted + full
             if row.status == STOPPED:
                 stopped += 1
                 wrong += full
                 if full:
                     break
-        rows.append(dict(seed=int(seed), births=compared, accepted=accepted,
+        rows.append(dict(seed=seed, births=compared, accepted=accepted,
                          stopped=stopped, wrongly_stopped=wrong))
     return pd.DataFrame(rows, columns=["seed", "births", "accepted", "stopped",
                                        "wrongly_stopped"])
-
-
-def wilson(hits: int, trials: int) -> tuple[float, float, float]:
-    """``hits / trials`` with its Wilson 95 % interval (NaN without a trial)."""
-    if not trials:
-        return np.nan, np.nan, np.nan
-    ci = scipy.stats.binomtest(hits, trials).proportion_ci(method="wilson")
-    return hits / trials, float(ci.low), float(ci.high)
 
 
 def _cell(interval: Contrast) -> str:
@@ -365,9 +364,9 @@ def _comparison_markdown(c: Comparison) -> list[str]:
 def _false_rejections(stops: pd.DataFrame) -> str:
     """The pooled wrongly stopped share of the accepted offspring, with its interval."""
     wrong, accepted = int(stops["wrongly_stopped"].sum()), int(stops["accepted"].sum())
-    rate, low, high = wilson(wrong, accepted)
     if not accepted:
         return "No compared offspring was accepted by full training.\n"
+    rate, low, high = wilson(wrong, accepted)
     return (f"Pooled: {wrong} of {accepted} offspring that full training accepted were "
             f"stopped, {100 * rate:.1f} % [Wilson 95 %: {100 * low:.1f}, "
             f"{100 * high:.1f}]; {int(stops['stopped'].sum())} stops compared.\n")
