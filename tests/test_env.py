@@ -53,6 +53,24 @@ def test_sizes_follow_the_robot(name: str) -> None:
     np.testing.assert_allclose(obs[:, -3:], [[0, 0, -1]] * 2, atol=1e-6)
 
 
+def test_stall_value_grows_while_the_robot_stands_and_drops_when_it_moves() -> None:
+    task = Reach(observe_stall=True, stall_radius=0.05, stall_seconds=1.0)
+    core, plain = (TaskCore(robot(), task=t, num_envs=2, seed=0) for t in (task, Reach()))
+    obs = core.reset()
+    np.testing.assert_array_equal(obs[:, :-1], plain.reset())  # one value more, at the end
+    assert (obs[:, -1] == 0).all()
+    still = np.zeros((2, core.action_size))
+    for k in range(1, 31):  # 1.5 s standing: 0.05 s a step over 1 s, capped at 1
+        obs = core.step(still).observation
+        np.testing.assert_allclose(obs[:, -1], min(k * 0.05, 1.0), atol=1e-6)
+    seen = []
+    for _ in range(40):  # driving: back to 0 each time the brain has moved 5 cm
+        seen.append(core.step(forward(core)).observation[0, -1])
+    assert seen[-1] < 0.25 and 0.0 in seen
+    assert (np.diff(seen) < 0).any()  # it fell while driving (from 1 to 0)
+    assert core.reset(np.array([False, True]))[1, -1] == 0  # a new episode starts at 0
+
+
 def test_state_layout_is_time_qpos_qvel() -> None:
     core = TaskCore(robot(), arena=ArenaParams.cluttered(), num_envs=2, seed=1)
     core.reset()

@@ -12,7 +12,7 @@ observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
 ``evo.envs.scene``.
 
 Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
-``observe_up``), in this order:
+``observe_up`` and ``+1`` with ``observe_stall``), in this order:
 
 ======================  ====  =========================================================
 brain linear velocity    3    m/s, in the brain frame
@@ -22,6 +22,8 @@ per motor                2    wheel speed / motor_max_speed, last command (both 
 per pivot                2    hinge angle / pivot_range, last command (both in [-1, 1])
 the task's extra values  k    ``Task.extra_slots`` (none for reach)
 gravity (observe_up)     3    unit vector of gravity in the brain frame
+stall (observe_stall)    1    time since the brain last moved ``stall_radius``, over
+                              ``stall_seconds``, capped at 1 (0 after a reset)
 ======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
@@ -202,6 +204,8 @@ class TaskCore:
         self.target = np.zeros((n, 3))
         self.action = np.zeros((n, m.nu))
         self.steps = np.zeros(n, dtype=np.int64)
+        self.still = np.zeros(n, dtype=np.int64)  # control steps since the brain last moved
+        self.still_from = np.zeros((n, 2))  # where it was then (x, y)
         self.returns = np.zeros(n)
         self.observation = np.zeros((n, self.obs_size), dtype=np.float32)
 
@@ -266,6 +270,8 @@ class TaskCore:
             self.target[i] = target
         self.action[chosen] = 0.0
         self.steps[chosen] = 0
+        self.still[chosen] = 0
+        self.still_from[chosen] = self.sensordata[chosen][:, self.i_origin][:, :2]
         self.returns[chosen] = 0.0
         self.rules.start(chosen)
         self.observation[chosen] = self._observe()[chosen]
@@ -299,6 +305,8 @@ class TaskCore:
         act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
         unstable = self._simulate(act)
         self.action[:] = act
+        if self.task.observe_stall:
+            self._track_stall()
         observation = self._observe()
         stable = ~unstable
         self.observation[stable] = observation[stable]
@@ -415,6 +423,14 @@ class TaskCore:
         towards /= np.maximum(np.linalg.norm(towards, axis=1, keepdims=True), 1e-9)
         return self.in_brain_frame(towards)
 
+    def _track_stall(self) -> None:
+        """Count the control steps since each brain last moved ``task.stall_radius``
+        (horizontally) from where it was then."""
+        here = self.sensordata[:, self.i_origin][:, :2]
+        moved = np.linalg.norm(here - self.still_from, axis=1) > self.task.stall_radius
+        self.still_from[moved] = here[moved]
+        self.still = np.where(moved, 0, self.still + 1)
+
     def _observe(self) -> npt.NDArray[np.float32]:
         """The observation of every arena from the current sensors (and the task's
         measures, which its rules keep)."""
@@ -432,6 +448,9 @@ class TaskCore:
             x, z = s[:, self.i_xaxis], s[:, self.i_zaxis]
             y = np.cross(z, x)
             parts.append(-np.stack([x[:, 2], y[:, 2], z[:, 2]], axis=1))
+        if self.task.observe_stall:
+            seconds = self.still * self.control_step / self.task.stall_seconds
+            parts.append(np.minimum(seconds, 1.0)[:, None])
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     def poses(self, arena: int) -> tuple[F64, F64]:

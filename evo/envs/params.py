@@ -3,8 +3,8 @@
 
 What a robot's observation and action look like is the task's business, not the
 body's: a robot knows its motors and pivots (``Robot.n_actuators``); every task
-observes 9 + 2(m + n) numbers, plus its ``extra_slots`` and 3 with ``observe_up``, and
-takes one command per actuator. Nothing here imports MuJoCo.
+observes 9 + 2(m + n) numbers, plus its ``extra_slots``, 3 with ``observe_up`` and 1 with
+``observe_stall``, and takes one command per actuator. Nothing here imports MuJoCo.
 """
 
 from __future__ import annotations
@@ -28,14 +28,18 @@ ACTUATOR_SLOTS = 2
 (wheel speed or hinge angle) and its last command."""
 
 UP_SLOTS = 3
-"""Observation values at the end with ``observe_up``: gravity."""
+"""Observation values after the task's extra ones with ``observe_up``: gravity."""
+
+STALL_SLOTS = 1
+"""Observation values at the end with ``observe_stall``: how long the robot stood still."""
 
 
 def observation_size(robot: Robot, task: Task) -> int:
     """Length of ``task``'s observation for ``robot``: 9 + 2(m + n), + the task's
-    ``extra_slots``, + 3 with ``observe_up``."""
+    ``extra_slots``, + 3 with ``observe_up``, + 1 with ``observe_stall``."""
     return (GLOBAL_SLOTS + ACTUATOR_SLOTS * robot.n_actuators + task.extra_slots
-            + (UP_SLOTS if task.observe_up else 0))
+            + (UP_SLOTS if task.observe_up else 0)
+            + (STALL_SLOTS if task.observe_stall else 0))
 
 
 def observation_origins(actuators: Sequence[int], parent_actuators: int,
@@ -44,7 +48,8 @@ def observation_origins(actuators: Sequence[int], parent_actuators: int,
 
     The layout is ``GLOBAL_SLOTS`` values of the brain and the task, ``ACTUATOR_SLOTS``
     per actuator in action order, then what the task adds at the end (its
-    ``extra_slots``, and ``UP_SLOTS`` with ``observe_up``): the global and trailing
+    ``extra_slots``, ``UP_SLOTS`` with ``observe_up``, ``STALL_SLOTS`` with
+    ``observe_stall``): the global and trailing
     values mean the same for every body, an actuator's two values follow the actuator.
 
     Args:

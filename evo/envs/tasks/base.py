@@ -3,8 +3,9 @@
 
 A task's observation keeps the layout inheritance relies on (``evo.envs.params``): the
 brain's linear and angular velocity (6) and three values of the task's own, two values
-per actuator in action order, then ``extra_slots`` more values of the task's and, with
-``observe_up``, gravity (3). Its reward is a sum of named terms (``reward_terms``), each
+per actuator in action order, then ``extra_slots`` more values of the task's, with
+``observe_up`` gravity (3) and with ``observe_stall`` how long the robot has stood still
+(1). Its reward is a sum of named terms (``reward_terms``), each
 logged as ``train/reward/<term>``.
 
 Writing a task is one module and one YAML file::
@@ -85,6 +86,13 @@ class Task:
         t_max: Control steps per episode before truncation.
         frame_skip: Physics steps per control step (0.005 s x 10 = 20 Hz control).
         observe_up: Add gravity's direction in the brain frame to the observation.
+        observe_stall: Add how long the brain has stood still to the observation
+            (one value, last): the time since it last moved ``stall_radius`` away from
+            where it was, over ``stall_seconds``, capped at 1. A memoryless controller
+            pinned against an obstacle sees the same observation every step and so
+            repeats its action; this value changes while it stays pinned.
+        stall_radius: Horizontal distance the brain must move to count as moving, m.
+        stall_seconds: Time of standing still at which the stall value reaches 1, s.
         max_height: A module centre higher than this, m, or beyond the walls' centre
             lines means the physics threw the robot (a contact blow-up): that arena's
             episode ends as unstable.
@@ -94,6 +102,9 @@ class Task:
     frame_skip: int = 10
     observe_up: bool = False
     max_height: float = 1.0
+    observe_stall: bool = False
+    stall_radius: float = 0.05
+    stall_seconds: float = 2.0
 
     reward_terms: ClassVar[tuple[str, ...]] = ()
     """The names of the reward's terms, in the order they are summed."""
@@ -102,7 +113,7 @@ class Task:
 
     def __post_init__(self) -> None:
         at_least(self, 1, "t_max", "frame_skip")
-        positive(self, "max_height")
+        positive(self, "max_height", "stall_radius", "stall_seconds")
 
     @property
     def marker_radius(self) -> float:
