@@ -19,7 +19,7 @@ demo: $(STAMP)
 	MUJOCO_GL=egl $(BIN)/python evo/main.py +exp=demo
 
 test: $(STAMP)
-	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile
+	MUJOCO_GL=egl $(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=15
 	$(BIN)/ruff check evo analysis tests bench
 	$(BIN)/mypy
 	$(BIN)/lint-imports
