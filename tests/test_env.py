@@ -71,6 +71,21 @@ def test_stall_value_grows_while_the_robot_stands_and_drops_when_it_moves() -> N
     assert core.reset(np.array([False, True]))[1, -1] == 0  # a new episode starts at 0
 
 
+def test_stall_count_counts_each_long_stand_once_per_episode() -> None:
+    task = Reach(observe_stall=True, observe_stall_count=True, stall_seconds=1.0)
+    core = TaskCore(robot(), task=task, num_envs=1, seed=0)
+    assert core.reset().shape[1] == TaskCore(robot(), num_envs=1).obs_size + 2
+    still = np.zeros((1, core.action_size))
+    counts = [core.step(still).observation[0, -1] for _ in range(30)]
+    np.testing.assert_allclose(counts, [0.0] * 19 + [0.25] * 11)  # at 1 s still, once
+    for _ in range(20):
+        core.step(forward(core))
+    for _ in range(20):
+        obs = core.step(still).observation
+    assert obs[0, -1] == pytest.approx(0.5)  # standing 1 s again: a second stall
+    assert core.reset()[0, -1] == 0
+
+
 def test_state_layout_is_time_qpos_qvel() -> None:
     core = TaskCore(robot(), arena=ArenaParams.cluttered(), num_envs=2, seed=1)
     core.reset()

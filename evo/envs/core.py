@@ -12,7 +12,8 @@ observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
 ``evo.envs.scene``.
 
 Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
-``observe_up`` and ``+1`` with ``observe_stall``), in this order:
+``observe_up``, ``+1`` with ``observe_stall`` and ``+1`` with ``observe_stall_count``), in
+this order:
 
 ======================  ====  =========================================================
 brain linear velocity    3    m/s, in the brain frame
@@ -24,6 +25,8 @@ the task's extra values  k    ``Task.extra_slots`` (none for reach)
 gravity (observe_up)     3    unit vector of gravity in the brain frame
 stall (observe_stall)    1    time since the brain last moved ``stall_radius``, over
                               ``stall_seconds``, capped at 1 (0 after a reset)
+stall count              1    times this episode it stood still for ``stall_seconds``,
+(observe_stall_count)         over 4, capped at 1
 ======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
@@ -206,6 +209,7 @@ class TaskCore:
         self.steps = np.zeros(n, dtype=np.int64)
         self.still = np.zeros(n, dtype=np.int64)  # control steps since the brain last moved
         self.still_from = np.zeros((n, 2))  # where it was then (x, y)
+        self.stalls = np.zeros(n, dtype=np.int64)  # times this episode still that long
         self.returns = np.zeros(n)
         self.observation = np.zeros((n, self.obs_size), dtype=np.float32)
 
@@ -215,6 +219,11 @@ class TaskCore:
         """Seconds of simulated time per control step: the physics timestep times
         ``task.frame_skip`` (0.005 s x 10 = 0.05 s by default)."""
         return float(self.model.opt.timestep * self.task.frame_skip)
+
+    @property
+    def _stall_steps(self) -> int:
+        """Control steps of standing still that make a stall (``task.stall_seconds``)."""
+        return max(1, math.ceil(self.task.stall_seconds / self.control_step - 1e-9))
 
     @property
     def obs_size(self) -> int:
@@ -271,6 +280,7 @@ class TaskCore:
         self.action[chosen] = 0.0
         self.steps[chosen] = 0
         self.still[chosen] = 0
+        self.stalls[chosen] = 0
         self.still_from[chosen] = self.sensordata[chosen][:, self.i_origin][:, :2]
         self.returns[chosen] = 0.0
         self.rules.start(chosen)
@@ -305,7 +315,7 @@ class TaskCore:
         act = np.clip(act.reshape(self.num_envs, self.action_size), -1, 1)
         unstable = self._simulate(act)
         self.action[:] = act
-        if self.task.observe_stall:
+        if self.task.observe_stall or self.task.observe_stall_count:
             self._track_stall()
         observation = self._observe()
         stable = ~unstable
@@ -425,11 +435,13 @@ class TaskCore:
 
     def _track_stall(self) -> None:
         """Count the control steps since each brain last moved ``task.stall_radius``
-        (horizontally) from where it was then."""
+        (horizontally) from where it was then, and the times this episode that count
+        reached ``task.stall_seconds``."""
         here = self.sensordata[:, self.i_origin][:, :2]
         moved = np.linalg.norm(here - self.still_from, axis=1) > self.task.stall_radius
         self.still_from[moved] = here[moved]
         self.still = np.where(moved, 0, self.still + 1)
+        self.stalls += self.still == self._stall_steps
 
     def _observe(self) -> npt.NDArray[np.float32]:
         """The observation of every arena from the current sensors (and the task's
@@ -451,6 +463,8 @@ class TaskCore:
         if self.task.observe_stall:
             seconds = self.still * self.control_step / self.task.stall_seconds
             parts.append(np.minimum(seconds, 1.0)[:, None])
+        if self.task.observe_stall_count:
+            parts.append(np.minimum(self.stalls / 4, 1.0)[:, None])
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     def poses(self, arena: int) -> tuple[F64, F64]:

@@ -4,9 +4,9 @@
 A task's observation keeps the layout inheritance relies on (``evo.envs.params``): the
 brain's linear and angular velocity (6) and three values of the task's own, two values
 per actuator in action order, then ``extra_slots`` more values of the task's, with
-``observe_up`` gravity (3) and with ``observe_stall`` how long the robot has stood still
-(1). Its reward is a sum of named terms (``reward_terms``), each
-logged as ``train/reward/<term>``.
+``observe_up`` gravity (3), with ``observe_stall`` how long the robot has stood still (1)
+and with ``observe_stall_count`` how often it has this episode (1). Its reward is a sum of
+named terms (``reward_terms``), each logged as ``train/reward/<term>``.
 
 Writing a task is one module and one YAML file::
 
@@ -91,8 +91,13 @@ class Task:
             where it was, over ``stall_seconds``, capped at 1. A memoryless controller
             pinned against an obstacle sees the same observation every step and so
             repeats its action; this value changes while it stays pinned.
+        observe_stall_count: Add how many times this episode the brain has stood still
+            for ``stall_seconds``, over 4, capped at 1 (one value, after the stall
+            value): a controller pinned by the same rock again can act otherwise than
+            the time before.
         stall_radius: Horizontal distance the brain must move to count as moving, m.
-        stall_seconds: Time of standing still at which the stall value reaches 1, s.
+        stall_seconds: Time of standing still at which the stall value reaches 1 (and
+            a stall counts), s.
         max_height: A module centre higher than this, m, or beyond the walls' centre
             lines means the physics threw the robot (a contact blow-up): that arena's
             episode ends as unstable.
@@ -103,6 +108,7 @@ class Task:
     observe_up: bool = False
     max_height: float = 1.0
     observe_stall: bool = False
+    observe_stall_count: bool = False
     stall_radius: float = 0.05
     stall_seconds: float = 2.0
 
