@@ -335,18 +335,34 @@ EXCLUDED: dict[str, str] = {
         "writes into docs/results; the page's next command runs it on the committed "
         "trainings",
     **{f"python evo/main.py $P {lever} hydra.run.dir=runs/deployed/{name}":
-       "25 trainings of 150k env steps with periodic evaluation (about an hour); "
-       "tests/test_learner.py trains with each lever"
+       "35 to 40 trainings of 150k env steps with periodic evaluation (about an hour); "
+       "tests/test_deployed.py trains with each lever"
        for lever, name in (("learner.keep_best=true env=clean", "keep_best_clean"),
                            ("learner.keep_best=true env=cluttered", "keep_best_cluttered"),
                            ("learner.bound_mean=true env=clean", "bound_mean_clean"),
                            ("learner.final_log_std=-2.5 env=clean", "anneal_clean"),
                            ("learner.keep_best=true learner.final_log_std=-2.0 "
-                            "learner.anneal_from=0.5 env=cluttered", "late_anneal_cluttered"))},
+                            "learner.anneal_from=0.5 env=cluttered", "late_anneal_cluttered"),
+                           ("learner.keep_best=true env.task.observe_stall=true env=clean",
+                            "stall_clean"),
+                           ("learner.keep_best=true env.task.observe_stall=true env=cluttered",
+                            "stall_cluttered"))},
+    **{f"python evo/main.py $C {lever} hydra.run.dir=runs/deployed/{name}":
+       "15 trainings of 150k env steps in the cluttered arena with periodic evaluation "
+       "(about 25 minutes); tests/test_env.py and tests/test_deployed.py check the "
+       "stall values and a training that observes them"
+       for lever, name in (("env.task.stall_seconds=0.5", "stall_fast_cluttered"),
+                           ("env.task.observe_stall_count=true", "stall_count_cluttered"))},
     "python docs/results/deployed/table.py keep_best=runs/deployed/keep_best_clean "
     "keep_best=runs/deployed/keep_best_cluttered bound_mean=runs/deployed/bound_mean_clean "
     "anneal=runs/deployed/anneal_clean late_anneal=runs/deployed/late_anneal_cluttered "
+    "stall=runs/deployed/stall_clean stall=runs/deployed/stall_cluttered "
+    "stall_fast=runs/deployed/stall_fast_cluttered "
+    "stall_count=runs/deployed/stall_count_cluttered "
     "--out docs/results/deployed": "reads the trainings the commands above make",
+    "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
+    "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
+        "reads the trainings' recordings, which the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/keep_best_clean snake_seed0 "
     "--out docs/results/deployed/mechanism.csv": "reads a training's recordings, which the "
                                                  "commands above make",
@@ -515,6 +531,9 @@ HOW: dict[str, How] = {
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
     "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_cars && cp robots/four_wheeler.json robots/steering_car.json "
+    "robots/held_out/crawler.json runs/deployed/robots_cars/": How(
+        makes=("runs/deployed/robots_cars/crawler.json",), group=RESULTS),
     "mkdir -p runs && cp -r docs/results/noise_sweep/study runs/noise_sweep": How(
         makes=("runs/noise_sweep/*",), group=RESULTS),
     **{f"python -m analysis.equal_cost --without {ER}/runs/ablation/{arm}_seed* --with "
