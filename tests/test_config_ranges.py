@@ -84,6 +84,8 @@ BAD: dict[str, Any] = {
     "env.task.target_min": -1.0,
     "env.task.target_max": 0.1,
     "env.task.max_height": 0.0,
+    "env.task.stall_radius": 0.0,
+    "env.task.stall_seconds": -1.0,
     "env.task.heading_range": 181.0,
     "env.task.success_distance": 0.0,
     "env.task.box_size": 0.0,
