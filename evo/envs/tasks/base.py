@@ -87,7 +87,7 @@ class Task:
         frame_skip: Physics steps per control step (0.005 s x 10 = 20 Hz control).
         observe_up: Add gravity's direction in the brain frame to the observation.
         observe_stall: Add how long the brain has stood still to the observation
-            (one value, last): the time since it last moved ``stall_radius`` away from
+            (one value, after gravity): the time since it last moved ``stall_radius`` away from
             where it was, over ``stall_seconds``, capped at 1. A memoryless controller
             pinned against an obstacle sees the same observation every step and so
             repeats its action; this value changes while it stays pinned.
