@@ -15,7 +15,7 @@ from gymnasium.utils.env_checker import check_env
 from torchrl.envs.utils import check_env_specs
 
 import evo.envs
-from evo.envs.arena import ArenaParams
+from evo.envs.arena import ArenaParams, obstacle_ranges
 from evo.envs.core import TaskCore
 from evo.envs.scene import Scene, compile_scene
 from evo.envs.tasks.reach import Reach
@@ -84,6 +84,41 @@ def test_stall_count_counts_each_long_stand_once_per_episode() -> None:
         obs = core.step(still).observation
     assert obs[0, -1] == pytest.approx(0.5)  # standing 1 s again: a second stall
     assert core.reset()[0, -1] == 0
+
+
+def test_obstacle_ranges_meet_the_first_rock_circle_or_the_wall() -> None:
+    origin = np.array([[0.0, 0.0], [1.5, 0.0]])
+    directions = np.array([[[1, 0], [0, 1], [-1, 0], [0, -1]]] * 2, dtype=float)
+    centres = np.array([[[0.5, 0.0], [0.3, 0.0], [-0.2, 1.0]],   # two ahead, one off the ray
+                        [[1.5, 0.0], [9.0, 9.0], [9.0, 9.0]]])   # the second starts inside one
+    radii = np.array([0.1, 0.05, 0.1])
+    got = obstacle_ranges(origin, directions, centres, radii, half_side=2.0)
+    np.testing.assert_allclose(got[0], [0.25, 2.0, 2.0, 2.0])  # the nearer rock; walls at 2 m
+    np.testing.assert_allclose(got[1], [0.0, 0.0, 0.0, 0.0])
+    behind = obstacle_ranges(origin[:1], directions[:1], np.array([[[-0.5, 0.0]]]),
+                             radii[:1], half_side=2.0)
+    np.testing.assert_allclose(behind[0], [2.0, 2.0, 0.4, 2.0])  # only the ray that looks back
+    walls = obstacle_ranges(origin[1:], directions[1:], np.zeros((1, 0, 2)), radii[:0], 2.0)
+    np.testing.assert_allclose(walls[0], [0.5, 2.0, 3.5, 2.0])
+
+
+def test_range_values_see_a_rock_set_ahead_of_the_brain_and_turn_with_it() -> None:
+    task = Reach(observe_range=True, range_rays=4, range_max=0.5)
+    arena = ArenaParams(n_rocks=1, rock_types=(ArenaParams().rock_types[2],))  # a ball, 4 cm
+    core = TaskCore(robot(), arena=arena, task=task, num_envs=1, seed=0)
+    plain = TaskCore(robot(), arena=arena, num_envs=1, seed=0)
+    np.testing.assert_array_equal(core.reset()[:, :-4], plain.reset())  # four values, last
+    brain = core.sensordata[0, core.i_origin][:2]
+    ahead = core.heading()[0]
+    rock = core.joint_address("rock0")
+    core.qpos[0, rock:rock + 2] = brain + 0.3 * ahead  # 0.3 m straight ahead
+    obs = core.step(np.zeros((1, core.action_size))).observation
+    np.testing.assert_allclose(obs[0, -4], (0.3 - 0.04) / 0.5, atol=0.02)
+    assert (obs[0, -3:] == 1.0).all()  # the walls are 2 m off: beyond range_max
+    core.qpos[0, rock:rock + 2] = brain + 0.2 * np.array([-ahead[1], ahead[0]])  # to its left
+    obs = core.step(np.zeros((1, core.action_size))).observation
+    np.testing.assert_allclose(obs[0, -3], (0.2 - 0.04) / 0.5, atol=0.02)
+    assert obs[0, -4] == 1.0
 
 
 def test_state_layout_is_time_qpos_qvel() -> None:

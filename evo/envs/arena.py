@@ -233,6 +233,46 @@ def arena_scene(params: ArenaParams, target_radius: float) -> ET.Element:
     return world
 
 
+def obstacle_ranges(
+    origin: npt.NDArray[np.float64],
+    directions: npt.NDArray[np.float64],
+    centres: npt.NDArray[np.float64],
+    radii: npt.NDArray[np.float64],
+    half_side: float,
+) -> npt.NDArray[np.float64]:
+    """How far each horizontal ray runs before it meets a rock or a wall, in the plane.
+
+    A rock is its horizontal bounding circle (``RockType.radius``), whatever its height;
+    the walls' inner faces stand at ``±half_side``. A ray that starts inside a rock's
+    circle meets it at 0.
+
+    Args:
+        origin: Where the rays start, (N, 2) m.
+        directions: Unit directions of each origin's rays, (N, K, 2).
+        centres: The rocks' centres, (N, R, 2) m (R may be 0).
+        radii: The rocks' bounding radii, (R,) m.
+        half_side: Half the arena's side, m.
+
+    Returns:
+        (N, K) distances, m.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bounds = np.where(directions > 0, half_side, -half_side)
+        to_wall = (bounds - origin[:, None, :]) / directions
+    distance: npt.NDArray[np.float64] = np.where(
+        np.isfinite(to_wall) & (to_wall >= 0), to_wall, np.inf).min(axis=2)
+    if centres.shape[1]:
+        towards = centres - origin[:, None, :]  # (N, R, 2)
+        along = np.einsum("nkd,nrd->nkr", directions, towards)  # (N, K, R)
+        across2 = (towards ** 2).sum(axis=2)[:, None, :] - along ** 2
+        half_chord2 = radii ** 2 - across2
+        half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
+        hit = (half_chord2 >= 0) & (along + half_chord >= 0)
+        to_rock = np.where(hit, np.maximum(along - half_chord, 0.0), np.inf).min(axis=2)
+        distance = np.minimum(distance, to_rock)
+    return distance
+
+
 def scatter_rocks(
     params: ArenaParams, target: npt.NDArray[np.float64], rng: np.random.Generator
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:

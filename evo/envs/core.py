@@ -12,8 +12,8 @@ observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
 ``evo.envs.scene``.
 
 Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
-``observe_up``, ``+1`` with ``observe_stall`` and ``+1`` with ``observe_stall_count``), in
-this order:
+``observe_up``, ``+1`` with ``observe_stall``, ``+1`` with ``observe_stall_count`` and
+``+range_rays`` with ``observe_range``), in this order:
 
 ======================  ====  =========================================================
 brain linear velocity    3    m/s, in the brain frame
@@ -27,6 +27,9 @@ stall (observe_stall)    1    time since the brain last moved ``stall_radius``, 
                               ``stall_seconds``, capped at 1 (0 after a reset)
 stall count              1    times this episode it stood still for ``stall_seconds``,
 (observe_stall_count)         over 4, capped at 1
+obstacle ranges          K    per ray (K = ``range_rays``, counter-clockwise from the
+(observe_range)               heading), the distance from the brain to the first rock
+                              or wall, over ``range_max``, capped at 1
 ======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
@@ -54,7 +57,7 @@ import mujoco.batch
 import numpy as np
 import numpy.typing as npt
 
-from evo.envs.arena import ArenaParams, scatter_rocks
+from evo.envs.arena import ArenaParams, obstacle_ranges, scatter_rocks
 from evo.envs.params import observation_size
 from evo.envs.scene import Scene, compile_scene
 from evo.envs.tasks.base import Task
@@ -188,6 +191,9 @@ class TaskCore:
             dtype=np.intp,
         )
         self.target_mocap = self.mocap_index("target")
+        self.rock_radii = np.array([rock.radius for rock in self.arena.rocks])
+        angles = 2 * np.pi * np.arange(self.task.range_rays) / self.task.range_rays
+        self.ray_turns = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (K, 2)
 
     def _allocate(self) -> None:
         n, m = self.num_envs, self.model
@@ -415,9 +421,7 @@ class TaskCore:
     def in_brain_frame(self, vectors: F64) -> F64:
         """Horizontal world vectors (N, 2) of every arena in its brain's horizontal frame
         (x = the brain's heading, y = its left)."""
-        heading = self.sensordata[:, self.i_xaxis][:, :2]
-        norm = np.linalg.norm(heading, axis=1, keepdims=True)
-        heading = np.where(norm > 1e-6, heading / np.maximum(norm, 1e-12), [1.0, 0.0])
+        heading = self.heading()
         return np.stack(
             [
                 (heading * vectors).sum(axis=1),
@@ -425,6 +429,25 @@ class TaskCore:
             ],
             axis=1,
         )
+
+    def heading(self) -> F64:
+        """Every arena's brain heading, its x axis on the floor, as a unit vector (N, 2)
+        (the world's x when the brain points straight up or down)."""
+        heading = self.sensordata[:, self.i_xaxis][:, :2]
+        norm = np.linalg.norm(heading, axis=1, keepdims=True)
+        unit: F64 = np.where(norm > 1e-6, heading / np.maximum(norm, 1e-12), [1.0, 0.0])
+        return unit
+
+    def obstacle_ranges(self) -> F64:
+        """For each arena, how far each of ``task.range_rays`` horizontal rays from the
+        brain (counter-clockwise from its heading) runs to a rock or a wall, (N, K) m."""
+        h = self.heading()
+        c, s = self.ray_turns[:, 0], self.ray_turns[:, 1]
+        directions = np.stack([h[:, :1] * c - h[:, 1:] * s, h[:, :1] * s + h[:, 1:] * c],
+                              axis=2)
+        rocks = self.qpos[:, self.rock_qpos[:, None] + np.arange(2)]  # (N, R, 2)
+        return obstacle_ranges(self.sensordata[:, self.i_origin][:, :2], directions, rocks,
+                               self.rock_radii, self.arena.side / 2)
 
     def direction_to(self, points: F64) -> F64:
         """The unit direction from every arena's brain to its point of ``points`` (N, 2+),
@@ -465,6 +488,8 @@ class TaskCore:
             parts.append(np.minimum(seconds, 1.0)[:, None])
         if self.task.observe_stall_count:
             parts.append(np.minimum(self.stalls / 4, 1.0)[:, None])
+        if self.task.observe_range:
+            parts.append(np.minimum(self.obstacle_ranges() / self.task.range_max, 1.0))
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     def poses(self, arena: int) -> tuple[F64, F64]:
