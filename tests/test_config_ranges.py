@@ -86,7 +86,7 @@ BAD: dict[str, Any] = {
     "env.task.max_height": 0.0,
     "env.task.stall_radius": 0.0,
     "env.task.stall_seconds": -1.0,
-    "env.task.range_rays": 0,
+    "env.task.range_sectors": 0,
     "env.task.range_max": 0.0,
     "env.task.heading_range": 181.0,
     "env.task.success_distance": 0.0,

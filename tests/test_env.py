@@ -86,24 +86,31 @@ def test_stall_count_counts_each_long_stand_once_per_episode() -> None:
     assert core.reset()[0, -1] == 0
 
 
-def test_obstacle_ranges_meet_the_first_rock_circle_or_the_wall() -> None:
+def test_obstacle_ranges_see_the_nearest_rock_or_wall_in_each_sector() -> None:
     origin = np.array([[0.0, 0.0], [1.5, 0.0]])
-    directions = np.array([[[1, 0], [0, 1], [-1, 0], [0, -1]]] * 2, dtype=float)
-    centres = np.array([[[0.5, 0.0], [0.3, 0.0], [-0.2, 1.0]],   # two ahead, one off the ray
-                        [[1.5, 0.0], [9.0, 9.0], [9.0, 9.0]]])   # the second starts inside one
+    heading = np.array([0.0, math.pi / 2])  # the second looks along +y
+    centres = np.array([[[0.5, 0.0], [0.3, 0.0], [-0.3, 1.0]],   # two ahead, one back left
+                        [[1.5, 0.05], [9.0, 9.0], [9.0, 9.0]]])  # the second is inside one
     radii = np.array([0.1, 0.05, 0.1])
-    got = obstacle_ranges(origin, directions, centres, radii, half_side=2.0)
-    np.testing.assert_allclose(got[0], [0.25, 2.0, 2.0, 2.0])  # the nearer rock; walls at 2 m
+    got = obstacle_ranges(origin, heading, 4, centres, radii, half_side=2.0)
+    # Sectors of 90 degrees: ahead, left, behind, right. Ahead the nearer rock; the walls
+    # 2 m off straight out. The rock back left (bearing 107 degrees) lies in "left".
+    np.testing.assert_allclose(got[0], [0.25, math.hypot(0.3, 1.0) - 0.1, 2.0, 2.0])
     np.testing.assert_allclose(got[1], [0.0, 0.0, 0.0, 0.0])
-    behind = obstacle_ranges(origin[:1], directions[:1], np.array([[[-0.5, 0.0]]]),
-                             radii[:1], half_side=2.0)
-    np.testing.assert_allclose(behind[0], [2.0, 2.0, 0.4, 2.0])  # only the ray that looks back
-    walls = obstacle_ranges(origin[1:], directions[1:], np.zeros((1, 0, 2)), radii[:0], 2.0)
-    np.testing.assert_allclose(walls[0], [0.5, 2.0, 3.5, 2.0])
+    walls = obstacle_ranges(origin[1:], heading[1:], 4, np.zeros((1, 0, 2)), radii[:0], 2.0)
+    # Looking along +y from (1.5, 0), 0.5 m from the +x wall: right, it lies straight
+    # out; ahead and behind, the sectors' edges meet it 45 degrees off; left, the +y
+    # wall's nearest point in the sector is nearer than the -x wall 3.5 m off.
+    edge = 1 / math.cos(math.pi / 4)
+    np.testing.assert_allclose(walls[0], [0.5 * edge, 2.0 * edge, 0.5 * edge, 0.5])
+    narrow = obstacle_ranges(origin[:1], heading[:1], 8, np.zeros((1, 0, 2)), radii[:0], 2.0)
+    # A sector 45 degrees wide centred 45 degrees off a wall meets it at its edge, 22.5
+    # degrees off the perpendicular.
+    np.testing.assert_allclose(narrow[0, 1], 2.0 / math.cos(math.radians(22.5)))
 
 
 def test_range_values_see_a_rock_set_ahead_of_the_brain_and_turn_with_it() -> None:
-    task = Reach(observe_range=True, range_rays=4, range_max=0.5)
+    task = Reach(observe_range=True, range_sectors=4, range_max=0.5)
     arena = ArenaParams(n_rocks=1, rock_types=(ArenaParams().rock_types[2],))  # a ball, 4 cm
     core = TaskCore(robot(), arena=arena, task=task, num_envs=1, seed=0)
     plain = TaskCore(robot(), arena=arena, num_envs=1, seed=0)

@@ -235,20 +235,26 @@ def arena_scene(params: ArenaParams, target_radius: float) -> ET.Element:
 
 def obstacle_ranges(
     origin: npt.NDArray[np.float64],
-    directions: npt.NDArray[np.float64],
+    heading: npt.NDArray[np.float64],
+    sectors: int,
     centres: npt.NDArray[np.float64],
     radii: npt.NDArray[np.float64],
     half_side: float,
 ) -> npt.NDArray[np.float64]:
-    """How far each horizontal ray runs before it meets a rock or a wall, in the plane.
+    """What a ring of ``sectors`` range sensors on the floor plane would read: for each
+    sector of the circle around ``origin`` (sector k centred ``2 pi k / sectors``
+    counter-clockwise from ``heading``, each as wide as the next), how far the nearest
+    rock or wall in it is.
 
-    A rock is its horizontal bounding circle (``RockType.radius``), whatever its height;
-    the walls' inner faces stand at ``±half_side``. A ray that starts inside a rock's
-    circle meets it at 0.
+    A rock is its horizontal bounding circle (``RockType.radius``), whatever its height:
+    it counts in every sector that some of it lies in, at the distance of its nearest
+    point (0 from inside it). A wall (inner faces at ``±half_side``) counts at the
+    distance of its nearest point within the sector.
 
     Args:
-        origin: Where the rays start, (N, 2) m.
-        directions: Unit directions of each origin's rays, (N, K, 2).
+        origin: Where the sensors sit, (N, 2) m.
+        heading: The world angle of each origin's first sector, (N,) rad.
+        sectors: Sensors in the ring, K.
         centres: The rocks' centres, (N, R, 2) m (R may be 0).
         radii: The rocks' bounding radii, (R,) m.
         half_side: Half the arena's side, m.
@@ -256,20 +262,31 @@ def obstacle_ranges(
     Returns:
         (N, K) distances, m.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bounds = np.where(directions > 0, half_side, -half_side)
-        to_wall = (bounds - origin[:, None, :]) / directions
-    distance: npt.NDArray[np.float64] = np.where(
-        np.isfinite(to_wall) & (to_wall >= 0), to_wall, np.inf).min(axis=2)
+    half = math.pi / sectors
+    middle = heading[:, None] + 2 * math.pi * np.arange(sectors) / sectors  # (N, K)
+
+    def apart(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The angle between directions a and b, in [0, pi]."""
+        return np.abs((a - b + math.pi) % (2 * math.pi) - math.pi)
+
+    normals = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])  # +x, +y, -x, -y walls
+    perpendicular = np.stack([half_side - origin[:, 0], half_side - origin[:, 1],
+                              half_side + origin[:, 0], half_side + origin[:, 1]], axis=1)
+    off = np.maximum(apart(normals[None, None, :], middle[:, :, None]) - half, 0.0)
+    with np.errstate(divide="ignore"):
+        to_wall = np.where(off < math.pi / 2,
+                           np.maximum(perpendicular, 0.0)[:, None, :] / np.cos(off), np.inf)
+    distance: npt.NDArray[np.float64] = to_wall.min(axis=2)
     if centres.shape[1]:
         towards = centres - origin[:, None, :]  # (N, R, 2)
-        along = np.einsum("nkd,nrd->nkr", directions, towards)  # (N, K, R)
-        across2 = (towards ** 2).sum(axis=2)[:, None, :] - along ** 2
-        half_chord2 = radii ** 2 - across2
-        half_chord = np.sqrt(np.maximum(half_chord2, 0.0))
-        hit = (half_chord2 >= 0) & (along + half_chord >= 0)
-        to_rock = np.where(hit, np.maximum(along - half_chord, 0.0), np.inf).min(axis=2)
-        distance = np.minimum(distance, to_rock)
+        apart_m = np.linalg.norm(towards, axis=2)
+        bearing = np.arctan2(towards[..., 1], towards[..., 0])
+        inside = apart_m <= radii
+        spread = np.where(inside, math.pi,
+                          np.arcsin(np.clip(radii / np.maximum(apart_m, 1e-12), 0.0, 1.0)))
+        seen = apart(bearing[:, None, :], middle[:, :, None]) <= half + spread[:, None, :]
+        gap = np.maximum(apart_m - radii, 0.0)[:, None, :]
+        distance = np.minimum(distance, np.where(seen, gap, np.inf).min(axis=2))
     return distance
 
 

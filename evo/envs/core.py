@@ -13,7 +13,7 @@ observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
 
 Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
 ``observe_up``, ``+1`` with ``observe_stall``, ``+1`` with ``observe_stall_count`` and
-``+range_rays`` with ``observe_range``), in this order:
+``+range_sectors`` with ``observe_range``), in this order:
 
 ======================  ====  =========================================================
 brain linear velocity    3    m/s, in the brain frame
@@ -27,9 +27,9 @@ stall (observe_stall)    1    time since the brain last moved ``stall_radius``, 
                               ``stall_seconds``, capped at 1 (0 after a reset)
 stall count              1    times this episode it stood still for ``stall_seconds``,
 (observe_stall_count)         over 4, capped at 1
-obstacle ranges          K    per ray (K = ``range_rays``, counter-clockwise from the
-(observe_range)               heading), the distance from the brain to the first rock
-                              or wall, over ``range_max``, capped at 1
+obstacle ranges          K    per sector around the brain (K = ``range_sectors``,
+(observe_range)               counter-clockwise from the heading), the distance to the
+                              nearest rock or wall in it, over ``range_max``, capped at 1
 ======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
@@ -192,8 +192,6 @@ class TaskCore:
         )
         self.target_mocap = self.mocap_index("target")
         self.rock_radii = np.array([rock.radius for rock in self.arena.rocks])
-        angles = 2 * np.pi * np.arange(self.task.range_rays) / self.task.range_rays
-        self.ray_turns = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (K, 2)
 
     def _allocate(self) -> None:
         n, m = self.num_envs, self.model
@@ -439,14 +437,13 @@ class TaskCore:
         return unit
 
     def obstacle_ranges(self) -> F64:
-        """For each arena, how far each of ``task.range_rays`` horizontal rays from the
-        brain (counter-clockwise from its heading) runs to a rock or a wall, (N, K) m."""
+        """For each arena, how far the nearest rock or wall is in each of
+        ``task.range_sectors`` equal sectors around the brain (counter-clockwise from
+        its heading), (N, K) m."""
         h = self.heading()
-        c, s = self.ray_turns[:, 0], self.ray_turns[:, 1]
-        directions = np.stack([h[:, :1] * c - h[:, 1:] * s, h[:, :1] * s + h[:, 1:] * c],
-                              axis=2)
         rocks = self.qpos[:, self.rock_qpos[:, None] + np.arange(2)]  # (N, R, 2)
-        return obstacle_ranges(self.sensordata[:, self.i_origin][:, :2], directions, rocks,
+        return obstacle_ranges(self.sensordata[:, self.i_origin][:, :2],
+                               np.arctan2(h[:, 1], h[:, 0]), self.task.range_sectors, rocks,
                                self.rock_radii, self.arena.side / 2)
 
     def direction_to(self, points: F64) -> F64:

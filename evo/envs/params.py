@@ -4,7 +4,7 @@
 What a robot's observation and action look like is the task's business, not the
 body's: a robot knows its motors and pivots (``Robot.n_actuators``); every task
 observes 9 + 2(m + n) numbers, plus its ``extra_slots``, 3 with ``observe_up``, 1 with
-``observe_stall``, 1 with ``observe_stall_count`` and ``range_rays`` with
+``observe_stall``, 1 with ``observe_stall_count`` and ``range_sectors`` with
 ``observe_range``, and takes one command per actuator.
 Nothing here imports MuJoCo.
 """
@@ -42,12 +42,12 @@ STALL_COUNT_SLOTS = 1
 def observation_size(robot: Robot, task: Task) -> int:
     """Length of ``task``'s observation for ``robot``: 9 + 2(m + n), + the task's
     ``extra_slots``, + 3 with ``observe_up``, + 1 with ``observe_stall``, + 1 with
-    ``observe_stall_count``, + ``range_rays`` with ``observe_range``."""
+    ``observe_stall_count``, + ``range_sectors`` with ``observe_range``."""
     return (GLOBAL_SLOTS + ACTUATOR_SLOTS * robot.n_actuators + task.extra_slots
             + (UP_SLOTS if task.observe_up else 0)
             + (STALL_SLOTS if task.observe_stall else 0)
             + (STALL_COUNT_SLOTS if task.observe_stall_count else 0)
-            + (task.range_rays if task.observe_range else 0))
+            + (task.range_sectors if task.observe_range else 0))
 
 
 def observation_origins(actuators: Sequence[int], parent_actuators: int,
@@ -57,7 +57,7 @@ def observation_origins(actuators: Sequence[int], parent_actuators: int,
     The layout is ``GLOBAL_SLOTS`` values of the brain and the task, ``ACTUATOR_SLOTS``
     per actuator in action order, then what the task adds at the end (its
     ``extra_slots``, ``UP_SLOTS`` with ``observe_up``, ``STALL_SLOTS`` with
-    ``observe_stall``, ``STALL_COUNT_SLOTS`` with ``observe_stall_count``, ``range_rays``
+    ``observe_stall``, ``STALL_COUNT_SLOTS`` with ``observe_stall_count``, ``range_sectors``
     with ``observe_range``): the global
     and trailing values mean the same for every body, an actuator's two values follow
     the actuator.

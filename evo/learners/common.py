@@ -543,5 +543,5 @@ def load_checkpoint(path: Path, *, robot: Robot | None = None,
         raise ValueError(f"{path}: the policy observes {sizes[0]} values but this env gives "
                          f"{obs_size}; run it with the env settings it was trained with "
                          "(env.task.observe_up adds 3, env.task.observe_stall 1, "
-                         "env.task.observe_range env.task.range_rays)")
+                         "env.task.observe_range env.task.range_sectors)")
     return policy

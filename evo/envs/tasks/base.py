@@ -6,7 +6,7 @@ brain's linear and angular velocity (6) and three values of the task's own, two 
 per actuator in action order, then ``extra_slots`` more values of the task's, with
 ``observe_up`` gravity (3), with ``observe_stall`` how long the robot has stood still (1)
 and with ``observe_stall_count`` how often it has this episode (1), with ``observe_range``
-how far the obstacles around it are (``range_rays``). Its reward is a sum of
+how far the obstacles around it are (``range_sectors``). Its reward is a sum of
 named terms (``reward_terms``), each logged as ``train/reward/<term>``.
 
 Writing a task is one module and one YAML file::
@@ -96,14 +96,15 @@ class Task:
             for ``stall_seconds``, over 4, capped at 1 (one value, after the stall
             value): a controller pinned by the same rock again can act otherwise than
             the time before.
-        observe_range: Add what the brain would see of the obstacles around it (``range_rays``
-            values, last): for each of ``range_rays`` horizontal rays from the brain's
-            centre, evenly spread around its heading counter-clockwise from straight
-            ahead, the distance to the first rock (its horizontal bounding circle,
-            whatever its height) or wall, over ``range_max``, capped at 1. Without it a
-            robot of the cluttered arena cannot tell a rock ahead from open floor.
-        range_rays: Rays of ``observe_range``.
-        range_max: Distance at which a ray's value reaches 1, m.
+        observe_range: Add what a ring of range sensors on the brain would read
+            (``range_sectors`` values, last): the circle around the brain's centre cut
+            into ``range_sectors`` equal sectors, counter-clockwise from its heading
+            (the first centred straight ahead), each the distance to the nearest rock
+            (its horizontal bounding circle, whatever its height) or wall in it, over
+            ``range_max``, capped at 1. Without it a robot of the cluttered arena
+            cannot tell a rock ahead from open floor.
+        range_sectors: Sensors (sectors) of ``observe_range``.
+        range_max: Distance at which a sensor's value reaches 1, m.
         stall_radius: Horizontal distance the brain must move to count as moving, m.
         stall_seconds: Time of standing still at which the stall value reaches 1 (and
             a stall counts), s.
@@ -121,7 +122,7 @@ class Task:
     stall_radius: float = 0.05
     stall_seconds: float = 2.0
     observe_range: bool = False
-    range_rays: int = 8
+    range_sectors: int = 8
     range_max: float = 0.5
 
     reward_terms: ClassVar[tuple[str, ...]] = ()
@@ -130,7 +131,7 @@ class Task:
     """Observation values the task adds after the per-actuator ones (before gravity)."""
 
     def __post_init__(self) -> None:
-        at_least(self, 1, "t_max", "frame_skip", "range_rays")
+        at_least(self, 1, "t_max", "frame_skip", "range_sectors")
         positive(self, "max_height", "stall_radius", "stall_seconds", "range_max")
 
     @property
