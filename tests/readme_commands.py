@@ -350,18 +350,23 @@ EXCLUDED: dict[str, str] = {
     **{f"python evo/main.py $C {lever} hydra.run.dir=runs/deployed/{name}":
        "15 trainings of 150k env steps in the cluttered arena with periodic evaluation "
        "(about 25 minutes); tests/test_env.py and tests/test_deployed.py check the "
-       "stall values and a training that observes them"
+       "stall and range values and a training that observes them"
        for lever, name in (("env.task.stall_seconds=0.5", "stall_fast_cluttered"),
-                           ("env.task.observe_stall_count=true", "stall_count_cluttered"))},
+                           ("env.task.observe_stall_count=true", "stall_count_cluttered"),
+                           ("env.task.observe_range=true", "range_cluttered"))},
     "python docs/results/deployed/table.py keep_best=runs/deployed/keep_best_clean "
     "keep_best=runs/deployed/keep_best_cluttered bound_mean=runs/deployed/bound_mean_clean "
     "anneal=runs/deployed/anneal_clean late_anneal=runs/deployed/late_anneal_cluttered "
     "stall=runs/deployed/stall_clean stall=runs/deployed/stall_cluttered "
     "stall_fast=runs/deployed/stall_fast_cluttered "
     "stall_count=runs/deployed/stall_count_cluttered "
-    "--out docs/results/deployed": "reads the trainings the commands above make",
+    "range=runs/deployed/range_cluttered --out docs/results/deployed":
+        "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
+        "reads the trainings' recordings, which the commands above make",
+    "python docs/results/deployed/mechanism.py runs/deployed/range_cluttered "
+    "four_wheeler_seed2 crawler_seed3 --out docs/results/deployed/mechanism_range.csv":
         "reads the trainings' recordings, which the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/keep_best_clean snake_seed0 "
     "--out docs/results/deployed/mechanism.csv": "reads a training's recordings, which the "
