@@ -374,6 +374,16 @@ EXCLUDED: dict[str, str] = {
     "python docs/results/deployed/mechanism.py runs/deployed/late_anneal_cluttered "
     "four_wheeler_seed2 crawler_seed4 --out docs/results/deployed/mechanism_cluttered.csv":
         "reads the trainings' recordings, which the commands above make",
+    "python evo/main.py +exp=retrain record=off seed=1000 retrain.random=32 retrain.seeds=3 "
+    "retrain.budget=50000 retrain.baseline=false learner.gamma=0.99 learner.lmbda=0.8 "
+    "learner.epochs=4 learner.minibatch_size=1024 learner.entropy_coeff=0.0 "
+    "learner.init_log_std=-1.0 learner.policy_out_gain=0.01 learner.reward_scaling=true "
+    "learner.hidden=[128,128] env.task.observe_up=false physics_step=dt6p25ms_x8 "
+    "env.task.observe_stall=true hydra.run.dir=runs/noise/heldout_stall":
+        "96 trainings of 50k env steps (about 15 minutes on 2 cores); test_configs composes "
+        "+exp=retrain",
+    "python -m analysis.noise_ceiling runs/noise/heldout_stall":
+        "reads the trainings the command above makes",
     "docs/results/noise_sweep/levers/run.sh": "five noise ceilings of 32 trainings (hours)",
     "python evo/main.py +exp=paper_cluttered hydra.run.dir=runs/paper_cluttered_final":
         "the paper's run in the cluttered arena (hours); test_configs composes it",
