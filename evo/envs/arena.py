@@ -279,13 +279,13 @@ def obstacle_ranges(
     distance: npt.NDArray[np.float64] = to_wall.min(axis=2)
     if centres.shape[1]:
         towards = centres - origin[:, None, :]  # (N, R, 2)
-        apart_m = np.linalg.norm(towards, axis=2)
+        to_centre = np.linalg.norm(towards, axis=2)
         bearing = np.arctan2(towards[..., 1], towards[..., 0])
-        inside = apart_m <= radii
+        inside = to_centre <= radii
         spread = np.where(inside, math.pi,
-                          np.arcsin(np.clip(radii / np.maximum(apart_m, 1e-12), 0.0, 1.0)))
+                          np.arcsin(np.clip(radii / np.maximum(to_centre, 1e-12), 0.0, 1.0)))
         seen = apart(bearing[:, None, :], middle[:, :, None]) <= half + spread[:, None, :]
-        gap = np.maximum(apart_m - radii, 0.0)[:, None, :]
+        gap = np.maximum(to_centre - radii, 0.0)[:, None, :]
         distance = np.minimum(distance, np.where(seen, gap, np.inf).min(axis=2))
     return distance
 

@@ -58,9 +58,8 @@ def observation_origins(actuators: Sequence[int], parent_actuators: int,
     per actuator in action order, then what the task adds at the end (its
     ``extra_slots``, ``UP_SLOTS`` with ``observe_up``, ``STALL_SLOTS`` with
     ``observe_stall``, ``STALL_COUNT_SLOTS`` with ``observe_stall_count``, ``range_sectors``
-    with ``observe_range``): the global
-    and trailing values mean the same for every body, an actuator's two values follow
-    the actuator.
+    with ``observe_range``): the global and trailing values mean the same for every body,
+    an actuator's two values follow the actuator.
 
     Args:
         actuators: For each actuator of the robot, the other robot's actuator it
