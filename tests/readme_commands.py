@@ -354,13 +354,18 @@ EXCLUDED: dict[str, str] = {
        for lever, name in (("env.task.stall_seconds=0.5", "stall_fast_cluttered"),
                            ("env.task.observe_stall_count=true", "stall_count_cluttered"),
                            ("env.task.observe_range=true", "range_cluttered"))},
+    "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
+    "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
+        "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
+        "(about 35 minutes)",
     "python docs/results/deployed/table.py keep_best=runs/deployed/keep_best_clean "
     "keep_best=runs/deployed/keep_best_cluttered bound_mean=runs/deployed/bound_mean_clean "
     "anneal=runs/deployed/anneal_clean late_anneal=runs/deployed/late_anneal_cluttered "
     "stall=runs/deployed/stall_clean stall=runs/deployed/stall_cluttered "
     "stall_fast=runs/deployed/stall_fast_cluttered "
     "stall_count=runs/deployed/stall_count_cluttered "
-    "range=runs/deployed/range_cluttered --out docs/results/deployed":
+    "range=runs/deployed/range_cluttered stall_300k=runs/deployed/stall_300k_cluttered "
+    "--out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
@@ -546,6 +551,9 @@ HOW: dict[str, How] = {
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
     "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_two && cp robots/four_wheeler.json "
+    "robots/held_out/crawler.json runs/deployed/robots_two/": How(
+        makes=("runs/deployed/robots_two/crawler.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_cars && cp robots/four_wheeler.json robots/steering_car.json "
     "robots/held_out/crawler.json runs/deployed/robots_cars/": How(
         makes=("runs/deployed/robots_cars/crawler.json",), group=RESULTS),
