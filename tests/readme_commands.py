@@ -465,6 +465,8 @@ HOW: dict[str, How] = {
         env="GALLERY_ONLY=reach_clean_designed",
         makes=("gallery_test/reach_clean_designed.webm",)),
     # ---- evo
+    "python evo/main.py +exp=deploy robot=robots/steering_car.json": How(
+        append=f"learner.total_steps=1024 {TINY_TRAINING}", says="deterministic evaluation:"),
     "python evo/main.py +exp=train robot=robots/snake.json env/task=locomotion": How(
         append=f"learner.total_steps=1024 {TINY_TRAINING}", says="deterministic evaluation:"),
     "python evo/main.py +exp=evaluate robot=robots/four_wheeler.json "

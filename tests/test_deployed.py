@@ -150,6 +150,20 @@ def test_an_annealed_spread_stays_under_its_bound(anneal_from: float) -> None:
     assert stds[-1] < stds[0] and stds[-1] == pytest.approx(bound[-1], rel=1e-5)
 
 
+@pytest.mark.parametrize("anneal_lr", [True, False])
+def test_the_learning_rate_falls_to_zero_only_when_annealed(anneal_lr: bool) -> None:
+    """Annealed, each batch's update runs at ``lr`` times the share of the budget left
+    before the batch; held, at ``lr`` to the last batch (the deployed controller's
+    setting: the mean action learns later than the noisy policy)."""
+    config = dataclasses.replace(SMALL, lr=1e-3, anneal_lr=anneal_lr)
+    budget = 4 * SMALL.frames_per_batch
+    result = train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, config=config, budget=budget,
+                       seed=3)
+    before = (result.curve["env_steps"] - SMALL.frames_per_batch).to_numpy()
+    expected = 1e-3 * (1 - before / budget) if anneal_lr else np.full(len(before), 1e-3)
+    np.testing.assert_allclose(result.curve["train/lr"].to_numpy(), expected, rtol=1e-6)
+
+
 @pytest.mark.parametrize(("fields", "message"), [
     (dict(keep_best=True), "keep_best needs periodic evaluations"),
     (dict(eval_interval=-1), "eval_interval must be >= 0"),
