@@ -346,14 +346,21 @@ EXCLUDED: dict[str, str] = {
                            ("learner.keep_best=true env.task.observe_stall=true env=clean",
                             "stall_clean"),
                            ("learner.keep_best=true env.task.observe_stall=true env=cluttered",
-                            "stall_cluttered"))},
+                            "stall_cluttered"),
+                           ("learner.keep_best=true env.task.observe_stall=true "
+                            "learner.anneal_lr=false retrain.robots=runs/deployed/robots_rest "
+                            "env=cluttered", "const_lr_cluttered_rest"),
+                           ("learner.keep_best=true env.task.observe_stall=true "
+                            "learner.anneal_lr=false env=clean", "const_lr_clean"))},
     **{f"python evo/main.py $C {lever} hydra.run.dir=runs/deployed/{name}":
        "15 trainings of 150k env steps in the cluttered arena with periodic evaluation "
        "(about 25 minutes); tests/test_env.py and tests/test_deployed.py check the "
        "stall and range values and a training that observes them"
        for lever, name in (("env.task.stall_seconds=0.5", "stall_fast_cluttered"),
                            ("env.task.observe_stall_count=true", "stall_count_cluttered"),
-                           ("env.task.observe_range=true", "range_cluttered"))},
+                           ("env.task.observe_range=true", "range_cluttered"),
+                           ("learner.anneal_lr=false", "const_lr_cluttered"),
+                           ("learner.epochs=8", "epochs8_cluttered"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -365,6 +372,8 @@ EXCLUDED: dict[str, str] = {
     "stall_fast=runs/deployed/stall_fast_cluttered "
     "stall_count=runs/deployed/stall_count_cluttered "
     "range=runs/deployed/range_cluttered stall_300k=runs/deployed/stall_300k_cluttered "
+    "const_lr=runs/deployed/const_lr_cluttered const_lr=runs/deployed/const_lr_cluttered_rest "
+    "const_lr=runs/deployed/const_lr_clean epochs8=runs/deployed/epochs8_cluttered "
     "--out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
@@ -553,6 +562,10 @@ HOW: dict[str, How] = {
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
     "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_rest && cp robots/inchworm.json robots/scoop_car.json "
+    "robots/snake.json robots/twisted_four_wheeler.json robots/held_out/six_wheeler.json "
+    "runs/deployed/robots_rest/": How(makes=("runs/deployed/robots_rest/snake.json",),
+                                      group=RESULTS),
     "mkdir -p runs/deployed/robots_two && cp robots/four_wheeler.json "
     "robots/held_out/crawler.json runs/deployed/robots_two/": How(
         makes=("runs/deployed/robots_two/crawler.json",), group=RESULTS),

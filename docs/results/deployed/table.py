@@ -10,8 +10,10 @@ Each RETRAIN_DIR is a ``+exp=designer`` folder (``trainings.csv`` and the curves
 after training of the policy a training hands back (``success_rate``, 20 episodes, seed
 + 1), the table gives the last periodic evaluation (16 episodes, seed + 2): that of the
 last policy, which is the handed-back one unless ``learner.keep_best`` chose another.
-Writes ``protocol.csv`` (one row per training) and ``protocol.md``; ``--keep`` adds the
-rows of an earlier ``protocol.csv`` for the levers and arenas the folders do not give.
+Writes ``protocol.csv`` (one row per training), ``protocol.md`` and ``periodic.csv``
+(the periodic evaluations' success along the training, the mean over seeds per lever,
+arena, robot and env steps); ``--keep`` adds the rows of an earlier ``protocol.csv``
+(and of the ``periodic.csv`` beside it) for the levers and arenas the folders do not give.
 """
 
 from __future__ import annotations
@@ -48,6 +50,32 @@ def trainings(lever: str, folder: Path) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def periodic(lever: str, folder: Path) -> pd.DataFrame:
+    """The periodic evaluations' success of ``folder``'s trainings, one row per evaluation."""
+    layout = RetrainLayout(folder)
+    out = []
+    for row in read_trainings(layout.trainings).itertuples():
+        curve = pd.read_csv(layout.curve(str(row.name))).dropna(subset=["eval/success_rate"])
+        out.append(pd.DataFrame({
+            "lever": lever, "arena": row.arena, "robot": row.robot, "seed": row.seed,
+            "env_steps": curve["env_steps"], "success": curve["eval/success_rate"]}))
+    return pd.concat(out, ignore_index=True)
+
+
+def along(evaluations: pd.DataFrame) -> pd.DataFrame:
+    """Per lever, arena, robot and env steps: the mean periodic success and its seeds."""
+    grouped = evaluations.groupby(["lever", "arena", "robot", "env_steps"], sort=True)
+    return grouped.agg(seeds=("seed", "size"), success=("success", "mean")).reset_index()
+
+
+def kept(earlier: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
+    """The rows of ``earlier`` whose lever and arena ``table`` does not give."""
+    given = set(zip(table["lever"], table["arena"], strict=True))
+    keep = [(lever, arena) not in given
+            for lever, arena in zip(earlier["lever"], earlier["arena"], strict=True)]
+    return earlier[keep]
+
+
 def summary(table: pd.DataFrame) -> pd.DataFrame:
     """Per lever, arena and robot: means and worst seeds."""
     grouped = table.groupby(["lever", "arena", "robot"], sort=True)
@@ -70,20 +98,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--keep", type=Path, help="an earlier protocol.csv")
     args = parser.parse_args(argv)
-    parts = []
+    parts, evaluations = [], []
     for given in args.folders:
         lever, _, folder = given.partition("=")
         parts.append(trainings(lever, Path(folder)))
+        evaluations.append(periodic(lever, Path(folder)))
     table = pd.concat(parts, ignore_index=True)
     table["gap"] = table["noisy_success"] - table["success"]
+    curves = along(pd.concat(evaluations, ignore_index=True))
     if args.keep is not None:
-        earlier = pd.read_csv(args.keep)
-        given = set(zip(table["lever"], table["arena"], strict=True))
-        kept = [(lever, arena) not in given
-                for lever, arena in zip(earlier["lever"], earlier["arena"], strict=True)]
-        table = pd.concat([earlier[kept], table], ignore_index=True)
+        table = pd.concat([kept(pd.read_csv(args.keep), table), table], ignore_index=True)
+        if (args.keep.parent / "periodic.csv").exists():
+            earlier = pd.read_csv(args.keep.parent / "periodic.csv")
+            curves = pd.concat([kept(earlier, curves), curves], ignore_index=True)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "protocol.csv", index=False)
+    curves.round(4).to_csv(args.out / "periodic.csv", index=False)
     text = markdown_table(summary(table).round(3))
     (args.out / "protocol.md").write_text(text + "\n")
     print(text)
