@@ -360,7 +360,11 @@ EXCLUDED: dict[str, str] = {
                            ("env.task.observe_stall_count=true", "stall_count_cluttered"),
                            ("env.task.observe_range=true", "range_cluttered"),
                            ("learner.anneal_lr=false", "const_lr_cluttered"),
-                           ("learner.epochs=8", "epochs8_cluttered"))},
+                           ("learner.epochs=8", "epochs8_cluttered"),
+                           ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_gap "
+                            "retrain.first_seed=5", "const_lr_cluttered_seeds5to9"),
+                           ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_gap_clean "
+                            "retrain.first_seed=5 env=clean", "const_lr_clean_seeds5to9"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -374,7 +378,8 @@ EXCLUDED: dict[str, str] = {
     "range=runs/deployed/range_cluttered stall_300k=runs/deployed/stall_300k_cluttered "
     "const_lr=runs/deployed/const_lr_cluttered const_lr=runs/deployed/const_lr_cluttered_rest "
     "const_lr=runs/deployed/const_lr_clean epochs8=runs/deployed/epochs8_cluttered "
-    "--out docs/results/deployed":
+    "const_lr_seeds5to9=runs/deployed/const_lr_cluttered_seeds5to9 "
+    "const_lr_seeds5to9=runs/deployed/const_lr_clean_seeds5to9 --out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
@@ -562,6 +567,12 @@ HOW: dict[str, How] = {
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
     "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_gap && cp robots/four_wheeler.json robots/snake.json "
+    "runs/deployed/robots_gap/": How(makes=("runs/deployed/robots_gap/snake.json",),
+                                     group=RESULTS),
+    "mkdir -p runs/deployed/robots_gap_clean && cp robots/snake.json robots/scoop_car.json "
+    "runs/deployed/robots_gap_clean/": How(makes=("runs/deployed/robots_gap_clean/snake.json",),
+                                           group=RESULTS),
     "mkdir -p runs/deployed/robots_rest && cp robots/inchworm.json robots/scoop_car.json "
     "robots/snake.json robots/twisted_four_wheeler.json robots/held_out/six_wheeler.json "
     "runs/deployed/robots_rest/": How(makes=("runs/deployed/robots_rest/snake.json",),
