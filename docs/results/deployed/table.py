@@ -58,7 +58,8 @@ def periodic(lever: str, folder: Path) -> pd.DataFrame:
         curve = pd.read_csv(layout.curve(str(row.name))).dropna(subset=["eval/success_rate"])
         out.append(pd.DataFrame({
             "lever": lever, "arena": row.arena, "robot": row.robot, "seed": row.seed,
-            "env_steps": curve["env_steps"], "success": curve["eval/success_rate"]}))
+            "env_steps": curve["env_steps"].astype(int),
+            "success": curve["eval/success_rate"]}))
     return pd.concat(out, ignore_index=True)
 
 
