@@ -364,7 +364,10 @@ EXCLUDED: dict[str, str] = {
                            ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_gap "
                             "retrain.first_seed=5", "const_lr_cluttered_seeds5to9"),
                            ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_gap_clean "
-                            "retrain.first_seed=5 env=clean", "const_lr_clean_seeds5to9"))},
+                            "retrain.first_seed=5 env=clean", "const_lr_clean_seeds5to9"),
+                           ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_fw "
+                            "retrain.first_seed=5 learner.eval_interval_episodes=32",
+                            "const_lr_eval32_fw"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -379,7 +382,8 @@ EXCLUDED: dict[str, str] = {
     "const_lr=runs/deployed/const_lr_cluttered const_lr=runs/deployed/const_lr_cluttered_rest "
     "const_lr=runs/deployed/const_lr_clean epochs8=runs/deployed/epochs8_cluttered "
     "const_lr_seeds5to9=runs/deployed/const_lr_cluttered_seeds5to9 "
-    "const_lr_seeds5to9=runs/deployed/const_lr_clean_seeds5to9 --out docs/results/deployed":
+    "const_lr_seeds5to9=runs/deployed/const_lr_clean_seeds5to9 "
+    "eval32=runs/deployed/const_lr_eval32_fw --out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
@@ -567,6 +571,8 @@ HOW: dict[str, How] = {
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
     "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_fw && cp robots/four_wheeler.json runs/deployed/robots_fw/":
+        How(makes=("runs/deployed/robots_fw/four_wheeler.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_gap && cp robots/four_wheeler.json robots/snake.json "
     "runs/deployed/robots_gap/": How(makes=("runs/deployed/robots_gap/snake.json",),
                                      group=RESULTS),
