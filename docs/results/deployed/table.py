@@ -28,12 +28,13 @@ from evo.run.layout import RetrainLayout
 from evo.run.records import read_trainings
 
 
-def trainings(lever: str, folder: Path) -> pd.DataFrame:
-    """One row per finished training of ``folder``, with its curve's summaries."""
-    rows = read_trainings(RetrainLayout(folder).trainings)
-    out = []
-    for row in rows.itertuples():
-        curve = pd.read_csv(RetrainLayout(folder).curve(str(row.name)))
+def trainings(lever: str, folder: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """One row per finished training of ``folder``, with its curve's summaries, and its
+    periodic evaluations' success, one row per evaluation (each curve read once)."""
+    layout = RetrainLayout(folder)
+    out, evaluations = [], []
+    for row in read_trainings(layout.trainings).itertuples():
+        curve = pd.read_csv(layout.curve(str(row.name)))
         evaluated = curve.dropna(subset=["eval/success_rate"])
         out.append({
             "lever": lever, "robot": row.robot, "arena": row.arena, "seed": row.seed,
@@ -47,20 +48,11 @@ def trainings(lever: str, folder: Path) -> pd.DataFrame:
             "final_mean_outside": curve["train/mean_outside"].iloc[-1],
             "wall_seconds": row.wall_seconds,
         })
-    return pd.DataFrame(out)
-
-
-def periodic(lever: str, folder: Path) -> pd.DataFrame:
-    """The periodic evaluations' success of ``folder``'s trainings, one row per evaluation."""
-    layout = RetrainLayout(folder)
-    out = []
-    for row in read_trainings(layout.trainings).itertuples():
-        curve = pd.read_csv(layout.curve(str(row.name))).dropna(subset=["eval/success_rate"])
-        out.append(pd.DataFrame({
+        evaluations.append(pd.DataFrame({
             "lever": lever, "arena": row.arena, "robot": row.robot, "seed": row.seed,
-            "env_steps": curve["env_steps"].astype(int),
-            "success": curve["eval/success_rate"]}))
-    return pd.concat(out, ignore_index=True)
+            "env_steps": evaluated["env_steps"].astype(int),
+            "success": evaluated["eval/success_rate"]}))
+    return pd.DataFrame(out), pd.concat(evaluations, ignore_index=True)
 
 
 def along(evaluations: pd.DataFrame) -> pd.DataFrame:
@@ -102,8 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     parts, evaluations = [], []
     for given in args.folders:
         lever, _, folder = given.partition("=")
-        parts.append(trainings(lever, Path(folder)))
-        evaluations.append(periodic(lever, Path(folder)))
+        rows, evaluated = trainings(lever, Path(folder))
+        parts.append(rows)
+        evaluations.append(evaluated)
     table = pd.concat(parts, ignore_index=True)
     table["gap"] = table["noisy_success"] - table["success"]
     curves = along(pd.concat(evaluations, ignore_index=True))
