@@ -231,24 +231,16 @@ def test_the_deploy_experiment_is_train_with_the_deployed_controllers_levers(
 ) -> None:
     """+exp=deploy trains as +exp=train does but for the four keys that make its mean
     action the one measured in docs/results/deployed.md; the rest is +exp=train's."""
-    train = OmegaConf.to_container(compose("config", overrides=["+exp=train"]))
-    deploy = OmegaConf.to_container(compose("config", overrides=["+exp=deploy"]))
-    assert isinstance(train, dict) and isinstance(deploy, dict)
-    levers = {("learner", "eval_interval"): 30000, ("learner", "keep_best"): True,
-              ("learner", "anneal_lr"): False, ("env", "task", "observe_stall"): True}
-
-    def leaves(tree: object, path: tuple[str, ...] = ()) -> dict[tuple[str, ...], object]:
-        if isinstance(tree, dict):
-            return {k: v for key, sub in tree.items() for k, v in leaves(sub, (*path, key)).items()}
-        return {path: tree}
-
-    train_leaves, deploy_leaves = leaves(train), leaves(deploy)
-    differ = {k for k in train_leaves.keys() | deploy_leaves.keys()
-              if train_leaves.get(k) != deploy_leaves.get(k)}
+    deploy_cfg = compose("config", overrides=["+exp=deploy"])
+    train, deploy = (pd.json_normalize(OmegaConf.to_container(cfg)).iloc[0]
+                     for cfg in (compose("config", overrides=["+exp=train"]), deploy_cfg))
+    levers = {"learner.eval_interval": 30000, "learner.keep_best": True,
+              "learner.anneal_lr": False, "env.task.observe_stall": True}
+    keys = train.index.union(deploy.index)
+    differ = {k for k in keys if train.get(k) != deploy.get(k)}
     assert differ == set(levers)
-    assert all(deploy_leaves[k] == v for k, v in levers.items())
-    assert typed(LearnerConfig, compose("config", overrides=["+exp=deploy"]).learner,
-                 "learner").keep_best
+    assert all(deploy[k] == v for k, v in levers.items())
+    assert typed(LearnerConfig, deploy_cfg.learner, "learner").keep_best
 
 
 def test_one_robot_training_leaves_room_for_failed_episodes(hydra_conf: None) -> None:
