@@ -19,6 +19,7 @@ arena, robot and env steps); ``--keep`` adds the rows of an earlier ``protocol.c
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -102,9 +103,12 @@ def main(argv: list[str] | None = None) -> int:
     curves = along(pd.concat(evaluations, ignore_index=True))
     if args.keep is not None:
         table = pd.concat([kept(pd.read_csv(args.keep), table), table], ignore_index=True)
-        if (args.keep.parent / "periodic.csv").exists():
-            earlier = pd.read_csv(args.keep.parent / "periodic.csv")
-            curves = pd.concat([kept(earlier, curves), curves], ignore_index=True)
+        beside = args.keep.parent / "periodic.csv"
+        if beside.exists():
+            curves = pd.concat([kept(pd.read_csv(beside), curves), curves], ignore_index=True)
+        else:
+            print(f"{beside}: not found; periodic.csv gets only the folders' evaluations",
+                  file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / "protocol.csv", index=False)
     curves.round(4).to_csv(args.out / "periodic.csv", index=False)
