@@ -367,7 +367,10 @@ EXCLUDED: dict[str, str] = {
                             "retrain.first_seed=5 env=clean", "const_lr_clean_seeds5to9"),
                            ("learner.anneal_lr=false retrain.robots=runs/deployed/robots_fw "
                             "retrain.first_seed=5 learner.eval_interval_episodes=32",
-                            "const_lr_eval32_fw"))},
+                            "const_lr_eval32_fw"),
+                           ("learner.anneal_lr=false learner.epochs=8 "
+                            "retrain.robots=runs/deployed/robots_gap retrain.seeds=10",
+                            "const_lr_epochs8_gap"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -383,7 +386,8 @@ EXCLUDED: dict[str, str] = {
     "const_lr=runs/deployed/const_lr_clean epochs8=runs/deployed/epochs8_cluttered "
     "const_lr_seeds5to9=runs/deployed/const_lr_cluttered_seeds5to9 "
     "const_lr_seeds5to9=runs/deployed/const_lr_clean_seeds5to9 "
-    "eval32=runs/deployed/const_lr_eval32_fw --out docs/results/deployed":
+    "eval32=runs/deployed/const_lr_eval32_fw "
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap --out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
