@@ -370,7 +370,13 @@ EXCLUDED: dict[str, str] = {
                             "const_lr_eval32_fw"),
                            ("learner.anneal_lr=false learner.epochs=8 "
                             "retrain.robots=runs/deployed/robots_gap retrain.seeds=10",
-                            "const_lr_epochs8_gap"))},
+                            "const_lr_epochs8_gap"),
+                           ("learner.anneal_lr=false learner.epochs=8 "
+                            "retrain.robots=runs/deployed/robots_others",
+                            "const_lr_epochs8_cluttered_others"),
+                           ("learner.anneal_lr=false learner.epochs=8 "
+                            "retrain.robots=runs/deployed/robots env=clean",
+                            "const_lr_epochs8_clean"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -387,7 +393,9 @@ EXCLUDED: dict[str, str] = {
     "const_lr_seeds5to9=runs/deployed/const_lr_cluttered_seeds5to9 "
     "const_lr_seeds5to9=runs/deployed/const_lr_clean_seeds5to9 "
     "eval32=runs/deployed/const_lr_eval32_fw "
-    "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap --out docs/results/deployed":
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap "
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_cluttered_others "
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_clean --out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
@@ -583,6 +591,10 @@ HOW: dict[str, How] = {
     "mkdir -p runs/deployed/robots_gap_clean && cp robots/snake.json robots/scoop_car.json "
     "runs/deployed/robots_gap_clean/": How(makes=("runs/deployed/robots_gap_clean/snake.json",),
                                            group=RESULTS),
+    "mkdir -p runs/deployed/robots_others && cp robots/steering_car.json "
+    "robots/twisted_four_wheeler.json robots/scoop_car.json robots/inchworm.json "
+    "robots/held_out/*.json runs/deployed/robots_others/": How(
+        makes=("runs/deployed/robots_others/crawler.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_rest && cp robots/inchworm.json robots/scoop_car.json "
     "robots/snake.json robots/twisted_four_wheeler.json robots/held_out/six_wheeler.json "
     "runs/deployed/robots_rest/": How(makes=("runs/deployed/robots_rest/snake.json",),
