@@ -335,7 +335,7 @@ EXCLUDED: dict[str, str] = {
         "writes into docs/results; the page's next command runs it on the committed "
         "trainings",
     **{f"python evo/main.py $P {lever} hydra.run.dir=runs/deployed/{name}":
-       "35 to 40 trainings of 150k env steps with periodic evaluation (about an hour); "
+       "25 to 40 trainings of 150k env steps with periodic evaluation (about an hour); "
        "tests/test_deployed.py trains with each lever"
        for lever, name in (("learner.keep_best=true env=clean", "keep_best_clean"),
                            ("learner.keep_best=true env=cluttered", "keep_best_cluttered"),
@@ -353,8 +353,8 @@ EXCLUDED: dict[str, str] = {
                            ("learner.keep_best=true env.task.observe_stall=true "
                             "learner.anneal_lr=false env=clean", "const_lr_clean"))},
     **{f"python evo/main.py $C {lever} hydra.run.dir=runs/deployed/{name}":
-       "15 trainings of 150k env steps in the cluttered arena with periodic evaluation "
-       "(about 25 minutes); tests/test_env.py and tests/test_deployed.py check the "
+       "5 to 40 trainings of 150k env steps with periodic evaluation "
+       "(10 minutes to an hour); tests/test_env.py and tests/test_deployed.py check the "
        "stall and range values and a training that observes them"
        for lever, name in (("env.task.stall_seconds=0.5", "stall_fast_cluttered"),
                            ("env.task.observe_stall_count=true", "stall_count_cluttered"),
