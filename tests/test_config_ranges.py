@@ -88,6 +88,7 @@ BAD: dict[str, Any] = {
     "env.task.stall_seconds": -1.0,
     "env.task.range_sectors": 0,
     "env.task.range_max": 0.0,
+    "env.task.clock_period": 0.0,
     "env.task.heading_range": 181.0,
     "env.task.success_distance": 0.0,
     "env.task.box_size": 0.0,

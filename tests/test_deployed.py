@@ -206,18 +206,19 @@ def test_a_runs_history_carries_the_deterministic_evaluation_beside_the_fitness(
     assert row.fitness == pytest.approx(history["fitness"].mean())
 
 
-def test_a_controller_that_observes_its_stall_and_ranges_trains_and_deploys_only_where_it_is_given(
+def test_a_controller_that_observes_its_stall_ranges_and_clock_deploys_only_where_they_are_given(
     tmp_path: Path,
 ) -> None:
     """``env.task.observe_stall`` adds one input to the policy, ``observe_range``
-    ``range_sectors``; the checkpoint runs in an env that gives them and is refused,
-    naming the keys, by one that does not."""
-    task = dataclasses.replace(NEAR.task, observe_stall=True, observe_range=True, range_sectors=4)
+    ``range_sectors``, ``observe_clock`` two; the checkpoint runs in an env that gives
+    them and is refused, naming the keys, by one that does not."""
+    task = dataclasses.replace(NEAR.task, observe_stall=True, observe_range=True, range_sectors=4,
+                               observe_clock=True)
     sensing = dataclasses.replace(NEAR, task=task)
     plain_size = observation_size(FOUR_WHEELER, NEAR.task)
     result = train_ppo(FOUR_WHEELER, physics=PHYSICS, env=sensing, config=SMALL,
                        budget=4 * SMALL.frames_per_batch, seed=SEED)
-    assert result.policy.head.mlp[0].in_features == plain_size + 1 + 4
+    assert result.policy.head.mlp[0].in_features == plain_size + 1 + 4 + 2
     path = save_checkpoint(result.policy, tmp_path / "p.pt", SMALL)
     loaded = load_checkpoint(path, obs_size=observation_size(FOUR_WHEELER, task))
     evaluation = evaluate_policy(FOUR_WHEELER, loaded, physics=PHYSICS, env=sensing,

@@ -71,6 +71,24 @@ def test_stall_value_grows_while_the_robot_stands_and_drops_when_it_moves() -> N
     assert core.reset(np.array([False, True]))[1, -1] == 0  # a new episode starts at 0
 
 
+def test_clock_follows_the_episode_time_and_restarts_with_it() -> None:
+    task = Reach(observe_clock=True, clock_period=0.5)
+    core, plain = (TaskCore(robot(), task=t, num_envs=2, seed=0) for t in (task, Reach()))
+    obs = core.reset()
+    np.testing.assert_array_equal(obs[:, :-2], plain.reset())  # two values more, at the end
+    np.testing.assert_allclose(obs[:, -2:], [[0, 1]] * 2, atol=1e-6)
+    still = np.zeros((2, core.action_size))
+    for k in range(1, 13):  # 0.05 s a step: a quarter period every 2.5 steps
+        obs = core.step(still).observation
+        phase = 2 * math.pi * k * 0.05 / 0.5
+        np.testing.assert_allclose(obs[:, -2:], [[math.sin(phase), math.cos(phase)]] * 2,
+                                   atol=1e-5)
+    # A new episode starts at 0; the arena that goes on keeps its time.
+    again = core.reset(np.array([False, True]))
+    np.testing.assert_allclose(again[1, -2:], [0, 1], atol=1e-6)
+    np.testing.assert_array_equal(again[0], obs[0])
+
+
 def test_stall_count_counts_each_long_stand_once_per_episode() -> None:
     task = Reach(observe_stall=True, observe_stall_count=True, stall_seconds=1.0)
     core = TaskCore(robot(), task=task, num_envs=1, seed=0)

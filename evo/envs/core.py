@@ -12,8 +12,8 @@ observation's layout and sizes are ``evo.envs.params``, the scene's MJCF
 ``evo.envs.scene``.
 
 Observation (``9 + 2(m + n)`` values, then the task's ``extra_slots``, then ``+3`` with
-``observe_up``, ``+1`` with ``observe_stall``, ``+1`` with ``observe_stall_count`` and
-``+range_sectors`` with ``observe_range``), in this order:
+``observe_up``, ``+1`` with ``observe_stall``, ``+1`` with ``observe_stall_count``,
+``+range_sectors`` with ``observe_range`` and ``+2`` with ``observe_clock``), in this order:
 
 ======================  ====  =========================================================
 brain linear velocity    3    m/s, in the brain frame
@@ -30,6 +30,8 @@ stall count              1    times this episode it stood still for ``stall_seco
 obstacle ranges          K    per sector around the brain (K = ``range_sectors``,
 (observe_range)               counter-clockwise from the heading), the distance to the
                               nearest rock or wall in it, over ``range_max``, capped at 1
+clock (observe_clock)    2    sine and cosine of 2 pi t / ``clock_period``, t the
+                              episode's simulated time, s (0 after a reset)
 ======================  ====  =========================================================
 
 Motors come first, then pivots, each in depth-first tree order (``BuiltRobot.actuators``,
@@ -487,6 +489,9 @@ class TaskCore:
             parts.append(np.minimum(self.stalls / 4, 1.0)[:, None])
         if self.task.observe_range:
             parts.append(np.minimum(self.obstacle_ranges() / self.task.range_max, 1.0))
+        if self.task.observe_clock:
+            phase = 2 * np.pi * self.time / self.task.clock_period
+            parts.append(np.stack([np.sin(phase), np.cos(phase)], axis=1))
         return np.concatenate(parts, axis=1).astype(np.float32)
 
     def poses(self, arena: int) -> tuple[F64, F64]:

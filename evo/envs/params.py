@@ -4,8 +4,8 @@
 What a robot's observation and action look like is the task's business, not the
 body's: a robot knows its motors and pivots (``Robot.n_actuators``); every task
 observes 9 + 2(m + n) numbers, plus its ``extra_slots``, 3 with ``observe_up``, 1 with
-``observe_stall``, 1 with ``observe_stall_count`` and ``range_sectors`` with
-``observe_range``, and takes one command per actuator.
+``observe_stall``, 1 with ``observe_stall_count``, ``range_sectors`` with
+``observe_range`` and 2 with ``observe_clock``, and takes one command per actuator.
 Nothing here imports MuJoCo.
 """
 
@@ -38,16 +38,21 @@ STALL_SLOTS = 1
 STALL_COUNT_SLOTS = 1
 """Observation values after the stall with ``observe_stall_count``: how often it stood still."""
 
+CLOCK_SLOTS = 2
+"""Observation values after the ranges with ``observe_clock``: the clock's sine and cosine."""
+
 
 def observation_size(robot: Robot, task: Task) -> int:
     """Length of ``task``'s observation for ``robot``: 9 + 2(m + n), + the task's
     ``extra_slots``, + 3 with ``observe_up``, + 1 with ``observe_stall``, + 1 with
-    ``observe_stall_count``, + ``range_sectors`` with ``observe_range``."""
+    ``observe_stall_count``, + ``range_sectors`` with ``observe_range``, + 2 with
+    ``observe_clock``."""
     return (GLOBAL_SLOTS + ACTUATOR_SLOTS * robot.n_actuators + task.extra_slots
             + (UP_SLOTS if task.observe_up else 0)
             + (STALL_SLOTS if task.observe_stall else 0)
             + (STALL_COUNT_SLOTS if task.observe_stall_count else 0)
-            + (task.range_sectors if task.observe_range else 0))
+            + (task.range_sectors if task.observe_range else 0)
+            + (CLOCK_SLOTS if task.observe_clock else 0))
 
 
 def observation_origins(actuators: Sequence[int], parent_actuators: int,
@@ -58,8 +63,9 @@ def observation_origins(actuators: Sequence[int], parent_actuators: int,
     per actuator in action order, then what the task adds at the end (its
     ``extra_slots``, ``UP_SLOTS`` with ``observe_up``, ``STALL_SLOTS`` with
     ``observe_stall``, ``STALL_COUNT_SLOTS`` with ``observe_stall_count``, ``range_sectors``
-    with ``observe_range``): the global and trailing values mean the same for every body,
-    an actuator's two values follow the actuator.
+    with ``observe_range``, ``CLOCK_SLOTS`` with ``observe_clock``): the global and
+    trailing values mean the same for every body, an actuator's two values follow the
+    actuator.
 
     Args:
         actuators: For each actuator of the robot, the other robot's actuator it

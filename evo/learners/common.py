@@ -387,7 +387,7 @@ def inherit(policy: Policy, start: Inheritance) -> None:
     if obs - ACTUATOR_SLOTS * act != p_obs - ACTUATOR_SLOTS * p_act:
         raise ValueError(f"inherit: the parent observes {p_obs} values for {p_act} actuators, "
                          f"the child {obs} for {act}: other env settings (observe_up, "
-                         "observe_stall, observe_range)")
+                         "observe_stall, observe_range, observe_clock)")
     if len(actuators) != act or not all(-1 <= k < p_act for k in actuators):
         raise ValueError(f"inherit: {list(actuators)} does not map the child's {act} actuators "
                          f"to the parent's {p_act}")
@@ -543,5 +543,5 @@ def load_checkpoint(path: Path, *, robot: Robot | None = None,
         raise ValueError(f"{path}: the policy observes {sizes[0]} values but this env gives "
                          f"{obs_size}; run it with the env settings it was trained with "
                          "(env.task.observe_up adds 3, env.task.observe_stall 1, "
-                         "env.task.observe_range env.task.range_sectors)")
+                         "env.task.observe_range env.task.range_sectors, env.task.observe_clock 2)")
     return policy

@@ -6,7 +6,8 @@ brain's linear and angular velocity (6) and three values of the task's own, two 
 per actuator in action order, then ``extra_slots`` more values of the task's, with
 ``observe_up`` gravity (3), with ``observe_stall`` how long the robot has stood still (1)
 and with ``observe_stall_count`` how often it has this episode (1), with ``observe_range``
-how far the obstacles around it are (``range_sectors``). Its reward is a sum of
+how far the obstacles around it are (``range_sectors``) and with ``observe_clock`` a
+clock (2). Its reward is a sum of
 named terms (``reward_terms``), each logged as ``train/reward/<term>``.
 
 Writing a task is one module and one YAML file::
@@ -104,6 +105,12 @@ class Task:
             ``range_max``, capped at 1. Without it a robot of the cluttered arena
             cannot tell a rock ahead from open floor.
         range_sectors: Sensors (sectors) of ``observe_range``.
+        observe_clock: Add a clock to the observation (two values, last): the sine and
+            cosine of 2 pi t / ``clock_period``, t the episode's simulated time (0 after a
+            reset). A memoryless controller's mean action is a function of the body's
+            state alone; with the clock it can also follow a rhythm of its own, as a
+            gait that oscillates (the snake's) needs where the state settles.
+        clock_period: Period of ``observe_clock``, s.
         range_max: Distance at which a sensor's value reaches 1, m.
         stall_radius: Horizontal distance the brain must move to count as moving, m.
         stall_seconds: Time of standing still at which the stall value reaches 1 (and
@@ -124,6 +131,8 @@ class Task:
     observe_range: bool = False
     range_sectors: int = 8
     range_max: float = 0.5
+    observe_clock: bool = False
+    clock_period: float = 1.0
 
     reward_terms: ClassVar[tuple[str, ...]] = ()
     """The names of the reward's terms, in the order they are summed."""
@@ -132,7 +141,8 @@ class Task:
 
     def __post_init__(self) -> None:
         at_least(self, 1, "t_max", "frame_skip", "range_sectors")
-        positive(self, "max_height", "stall_radius", "stall_seconds", "range_max")
+        positive(self, "max_height", "stall_radius", "stall_seconds", "range_max",
+                 "clock_period")
 
     @property
     def marker_radius(self) -> float:
