@@ -376,7 +376,25 @@ EXCLUDED: dict[str, str] = {
                             "const_lr_epochs8_cluttered_others"),
                            ("learner.anneal_lr=false learner.epochs=8 "
                             "retrain.robots=runs/deployed/robots env=clean",
-                            "const_lr_epochs8_clean"))},
+                            "const_lr_epochs8_clean"),
+                           ("$L retrain.robots=runs/deployed/robots_gap",
+                            "const_lr_late_anneal_gap"),
+                           ("$L retrain.robots=runs/deployed/robots_others",
+                            "const_lr_late_anneal_others"),
+                           ("$L retrain.robots=runs/deployed/robots_gap_clean env=clean",
+                            "const_lr_late_anneal_gap_clean"),
+                           ("$L retrain.robots=runs/deployed/robots_clean_rest env=clean",
+                            "const_lr_late_anneal_clean_rest"),
+                           ("$L retrain.robots=runs/deployed/robots_gap retrain.first_seed=5",
+                            "const_lr_late_anneal_gap_seeds5to9"),
+                           ("$L retrain.robots=runs/deployed/robots_gap_clean "
+                            "retrain.first_seed=5 env=clean",
+                            "const_lr_late_anneal_gap_clean_seeds5to9"),
+                           ("learner.anneal_lr=false env.task.observe_clock=true "
+                            "retrain.robots=runs/deployed/robots_gap", "clock_gap"),
+                           ("learner.anneal_lr=false env.task.observe_clock=true "
+                            "retrain.robots=runs/deployed/robots_gap_clean env=clean",
+                            "clock_gap_clean"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -395,7 +413,15 @@ EXCLUDED: dict[str, str] = {
     "eval32=runs/deployed/const_lr_eval32_fw "
     "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap "
     "const_lr_epochs8=runs/deployed/const_lr_epochs8_cluttered_others "
-    "const_lr_epochs8=runs/deployed/const_lr_epochs8_clean --out docs/results/deployed":
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_clean "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_gap "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_others "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_gap_clean "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_clean_rest "
+    "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_seeds5to9 "
+    "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_clean_seeds5to9 "
+    "clock=runs/deployed/clock_gap clock=runs/deployed/clock_gap_clean "
+    "--out docs/results/deployed":
         "reads the trainings the commands above make",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
@@ -585,6 +611,10 @@ HOW: dict[str, How] = {
     "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_fw && cp robots/four_wheeler.json runs/deployed/robots_fw/":
         How(makes=("runs/deployed/robots_fw/four_wheeler.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_clean_rest && cp robots/four_wheeler.json "
+    "robots/steering_car.json robots/twisted_four_wheeler.json robots/inchworm.json "
+    "robots/held_out/*.json runs/deployed/robots_clean_rest/": How(
+        makes=("runs/deployed/robots_clean_rest/crawler.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_gap && cp robots/four_wheeler.json robots/snake.json "
     "runs/deployed/robots_gap/": How(makes=("runs/deployed/robots_gap/snake.json",),
                                      group=RESULTS),
