@@ -390,6 +390,8 @@ EXCLUDED: dict[str, str] = {
                            ("$L retrain.robots=runs/deployed/robots_gap_clean "
                             "retrain.first_seed=5 env=clean",
                             "const_lr_late_anneal_gap_clean_seeds5to9"),
+                           ("$L learner.epochs=8 retrain.robots=runs/deployed/robots_fw "
+                            "retrain.seeds=10", "const_lr_epochs8_late_anneal_fw"),
                            ("learner.anneal_lr=false env.task.observe_clock=true "
                             "retrain.robots=runs/deployed/robots_gap", "clock_gap"),
                            ("learner.anneal_lr=false env.task.observe_clock=true "
@@ -420,6 +422,7 @@ EXCLUDED: dict[str, str] = {
     "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_clean_rest "
     "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_seeds5to9 "
     "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_clean_seeds5to9 "
+    "const_lr_epochs8_late_anneal=runs/deployed/const_lr_epochs8_late_anneal_fw "
     "clock=runs/deployed/clock_gap clock=runs/deployed/clock_gap_clean "
     "--out docs/results/deployed":
         "reads the trainings the commands above make",

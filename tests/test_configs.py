@@ -229,13 +229,14 @@ def test_experiments_give_every_arena_room_for_a_failed_episode(
 def test_the_deploy_experiment_is_train_with_the_deployed_controllers_levers(
     hydra_conf: None,
 ) -> None:
-    """+exp=deploy trains as +exp=train does but for the four keys that make its mean
+    """+exp=deploy trains as +exp=train does but for the six keys that make its mean
     action the one measured in docs/results/deployed.md; the rest is +exp=train's."""
     deploy_cfg = compose("config", overrides=["+exp=deploy"])
     train, deploy = (pd.json_normalize(OmegaConf.to_container(cfg)).iloc[0]
                      for cfg in (compose("config", overrides=["+exp=train"]), deploy_cfg))
     levers = {"learner.eval_interval": 30000, "learner.keep_best": True,
-              "learner.anneal_lr": False, "env.task.observe_stall": True}
+              "learner.anneal_lr": False, "env.task.observe_stall": True,
+              "learner.final_log_std": -2.0, "learner.anneal_from": 0.8}
     keys = train.index.union(deploy.index)
     differ = {k for k in keys if train.get(k) != deploy.get(k)}
     assert differ == set(levers)
