@@ -392,6 +392,8 @@ EXCLUDED: dict[str, str] = {
                             "const_lr_late_anneal_gap_clean_seeds5to9"),
                            ("$L learner.epochs=8 retrain.robots=runs/deployed/robots_fw "
                             "retrain.seeds=10", "const_lr_epochs8_late_anneal_fw"),
+                           ("$L retrain.robots=runs/deployed/robots_cars_rest "
+                            "retrain.first_seed=5", "const_lr_late_anneal_cars_seeds5to9"),
                            ("learner.anneal_lr=false env.task.observe_clock=true "
                             "retrain.robots=runs/deployed/robots_gap", "clock_gap"),
                            ("learner.anneal_lr=false env.task.observe_clock=true "
@@ -422,6 +424,7 @@ EXCLUDED: dict[str, str] = {
     "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_clean_rest "
     "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_seeds5to9 "
     "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_gap_clean_seeds5to9 "
+    "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_cars_seeds5to9 "
     "const_lr_epochs8_late_anneal=runs/deployed/const_lr_epochs8_late_anneal_fw "
     "clock=runs/deployed/clock_gap clock=runs/deployed/clock_gap_clean "
     "--out docs/results/deployed":
@@ -618,6 +621,9 @@ HOW: dict[str, How] = {
     "robots/steering_car.json robots/twisted_four_wheeler.json robots/inchworm.json "
     "robots/held_out/*.json runs/deployed/robots_clean_rest/": How(
         makes=("runs/deployed/robots_clean_rest/crawler.json",), group=RESULTS),
+    "mkdir -p runs/deployed/robots_cars_rest && cp robots/steering_car.json "
+    "robots/held_out/crawler.json runs/deployed/robots_cars_rest/": How(
+        makes=("runs/deployed/robots_cars_rest/crawler.json",), group=RESULTS),
     "mkdir -p runs/deployed/robots_gap && cp robots/four_wheeler.json robots/snake.json "
     "runs/deployed/robots_gap/": How(makes=("runs/deployed/robots_gap/snake.json",),
                                      group=RESULTS),
