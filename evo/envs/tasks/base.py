@@ -7,8 +7,8 @@ per actuator in action order, then ``extra_slots`` more values of the task's, wi
 ``observe_up`` gravity (3), with ``observe_stall`` how long the robot has stood still (1)
 and with ``observe_stall_count`` how often it has this episode (1), with ``observe_range``
 how far the obstacles around it are (``range_sectors``) and with ``observe_clock`` a
-clock (2). Its reward is a sum of
-named terms (``reward_terms``), each logged as ``train/reward/<term>``.
+clock (2). Its reward is a sum of named terms (``reward_terms``), each logged as
+``train/reward/<term>``.
 
 Writing a task is one module and one YAML file::
 
@@ -105,13 +105,13 @@ class Task:
             ``range_max``, capped at 1. Without it a robot of the cluttered arena
             cannot tell a rock ahead from open floor.
         range_sectors: Sensors (sectors) of ``observe_range``.
+        range_max: Distance at which a sensor's value reaches 1, m.
         observe_clock: Add a clock to the observation (two values, last): the sine and
             cosine of 2 pi t / ``clock_period``, t the episode's simulated time (0 after a
             reset). A memoryless controller's mean action is a function of the body's
-            state alone; with the clock it can also follow a rhythm of its own, as a
-            gait that oscillates (the snake's) needs where the state settles.
+            state alone; with the clock it can also follow a rhythm of its own (on the
+            reach task it made every robot tried worse: docs/results/deployed.md).
         clock_period: Period of ``observe_clock``, s.
-        range_max: Distance at which a sensor's value reaches 1, m.
         stall_radius: Horizontal distance the brain must move to count as moving, m.
         stall_seconds: Time of standing still at which the stall value reaches 1 (and
             a stall counts), s.
