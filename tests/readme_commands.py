@@ -512,6 +512,15 @@ SMALL_THROUGHPUT = f"learner.num_envs=16 learner.minibatch_size=128 {THROUGHPUT}
 ANALYSIS = "analysis"
 RESULTS = "results"
 ER = "docs/results/early_rejection"
+
+
+def deployed_robots(folder: str, files: str, makes: str) -> tuple[str, How]:
+    """The results page's command that gathers ``files`` into ``runs/deployed/<folder>/``
+    for a comparison's trainings, and how it is run: it must leave ``<folder>/<makes>``."""
+    return (f"mkdir -p runs/deployed/{folder} && cp {files} runs/deployed/{folder}/",
+            How(makes=(f"runs/deployed/{folder}/{makes}",), group=RESULTS))
+
+
 HOW: dict[str, How] = {
     # ---- the runs the others read, made first
     "python evo/main.py +exp=smoke": How(makes_run="smoke", says="best robot:"),
@@ -613,37 +622,24 @@ HOW: dict[str, How] = {
     "locomotion=docs/results/tasks/matrix/locomotion push=docs/results/tasks/matrix/push "
     "rough=docs/results/tasks/matrix/rough --out matrix/": How(
         makes=("matrix/matrix.md", "matrix/matrix.png"), group=RESULTS),
-    "mkdir -p runs/deployed/robots && cp robots/*.json robots/held_out/*.json "
-    "runs/deployed/robots/": How(makes=("runs/deployed/robots/snake.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_fw && cp robots/four_wheeler.json runs/deployed/robots_fw/":
-        How(makes=("runs/deployed/robots_fw/four_wheeler.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_clean_rest && cp robots/four_wheeler.json "
-    "robots/steering_car.json robots/twisted_four_wheeler.json robots/inchworm.json "
-    "robots/held_out/*.json runs/deployed/robots_clean_rest/": How(
-        makes=("runs/deployed/robots_clean_rest/crawler.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_cars_rest && cp robots/steering_car.json "
-    "robots/held_out/crawler.json runs/deployed/robots_cars_rest/": How(
-        makes=("runs/deployed/robots_cars_rest/crawler.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_gap && cp robots/four_wheeler.json robots/snake.json "
-    "runs/deployed/robots_gap/": How(makes=("runs/deployed/robots_gap/snake.json",),
-                                     group=RESULTS),
-    "mkdir -p runs/deployed/robots_gap_clean && cp robots/snake.json robots/scoop_car.json "
-    "runs/deployed/robots_gap_clean/": How(makes=("runs/deployed/robots_gap_clean/snake.json",),
-                                           group=RESULTS),
-    "mkdir -p runs/deployed/robots_others && cp robots/steering_car.json "
-    "robots/twisted_four_wheeler.json robots/scoop_car.json robots/inchworm.json "
-    "robots/held_out/*.json runs/deployed/robots_others/": How(
-        makes=("runs/deployed/robots_others/crawler.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_rest && cp robots/inchworm.json robots/scoop_car.json "
-    "robots/snake.json robots/twisted_four_wheeler.json robots/held_out/six_wheeler.json "
-    "runs/deployed/robots_rest/": How(makes=("runs/deployed/robots_rest/snake.json",),
-                                      group=RESULTS),
-    "mkdir -p runs/deployed/robots_two && cp robots/four_wheeler.json "
-    "robots/held_out/crawler.json runs/deployed/robots_two/": How(
-        makes=("runs/deployed/robots_two/crawler.json",), group=RESULTS),
-    "mkdir -p runs/deployed/robots_cars && cp robots/four_wheeler.json robots/steering_car.json "
-    "robots/held_out/crawler.json runs/deployed/robots_cars/": How(
-        makes=("runs/deployed/robots_cars/crawler.json",), group=RESULTS),
+    **dict(deployed_robots(folder, files, makes) for folder, files, makes in (
+        ("robots", "robots/*.json robots/held_out/*.json", "snake.json"),
+        ("robots_fw", "robots/four_wheeler.json", "four_wheeler.json"),
+        ("robots_clean_rest", "robots/four_wheeler.json robots/steering_car.json "
+         "robots/twisted_four_wheeler.json robots/inchworm.json robots/held_out/*.json",
+         "crawler.json"),
+        ("robots_cars_rest", "robots/steering_car.json robots/held_out/crawler.json",
+         "crawler.json"),
+        ("robots_gap", "robots/four_wheeler.json robots/snake.json", "snake.json"),
+        ("robots_gap_clean", "robots/snake.json robots/scoop_car.json", "snake.json"),
+        ("robots_others", "robots/steering_car.json robots/twisted_four_wheeler.json "
+         "robots/scoop_car.json robots/inchworm.json robots/held_out/*.json", "crawler.json"),
+        ("robots_rest", "robots/inchworm.json robots/scoop_car.json robots/snake.json "
+         "robots/twisted_four_wheeler.json robots/held_out/six_wheeler.json", "snake.json"),
+        ("robots_two", "robots/four_wheeler.json robots/held_out/crawler.json",
+         "crawler.json"),
+        ("robots_cars", "robots/four_wheeler.json robots/steering_car.json "
+         "robots/held_out/crawler.json", "crawler.json"))),
     "mkdir -p runs && cp -r docs/results/noise_sweep/study runs/noise_sweep": How(
         makes=("runs/noise_sweep/*",), group=RESULTS),
     **{f"python -m analysis.equal_cost --without {ER}/runs/ablation/{arm}_seed* --with "
