@@ -398,7 +398,10 @@ EXCLUDED: dict[str, str] = {
                             "retrain.robots=runs/deployed/robots_gap", "clock_gap"),
                            ("learner.anneal_lr=false env.task.observe_clock=true "
                             "retrain.robots=runs/deployed/robots_gap_clean env=clean",
-                            "clock_gap_clean"))},
+                            "clock_gap_clean"),
+                           ("learner.anneal_lr=false learner.final_log_std=-3.0 "
+                            "learner.anneal_from=0.6 retrain.robots=runs/deployed/robots_fw",
+                            "narrow_early_fw"))},
     "python evo/main.py $C retrain.robots=runs/deployed/robots_two "
     "learner.total_steps=300000 hydra.run.dir=runs/deployed/stall_300k_cluttered":
         "10 trainings of 300k env steps in the cluttered arena with periodic evaluation "
@@ -427,8 +430,22 @@ EXCLUDED: dict[str, str] = {
     "const_lr_late_anneal_seeds5to9=runs/deployed/const_lr_late_anneal_cars_seeds5to9 "
     "const_lr_epochs8_late_anneal=runs/deployed/const_lr_epochs8_late_anneal_fw "
     "clock=runs/deployed/clock_gap clock=runs/deployed/clock_gap_clean "
-    "--out docs/results/deployed":
+    "narrow_early=runs/deployed/narrow_early_fw --out docs/results/deployed":
         "reads the trainings the commands above make",
+    "python docs/results/deployed/reevaluate.py "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_gap "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_others "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_gap_clean "
+    "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_clean_rest "
+    "--robots four_wheeler crawler steering_car twisted_four_wheeler snake scoop_car "
+    "--out docs/results/deployed/reevaluated.csv":
+        "runs the policies of the trainings the commands above make on 100 more episodes "
+        "each (about 2 minutes per cluttered training)",
+    "python docs/results/deployed/reevaluate.py "
+    "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap --robots four_wheeler "
+    "--out docs/results/deployed/reevaluated.csv":
+        "runs the policies of the trainings a command above makes on 100 more episodes "
+        "each (about 2 minutes per training)",
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
         "reads the trainings' recordings, which the commands above make",
