@@ -358,3 +358,39 @@ def test_the_trainings_are_those_of_exp_train(comparison: tuple[Path, list[str]]
     assert row["fitness"] == pytest.approx(alone["fitness"], abs=1e-12)
     assert row["eval_mean_return"] == pytest.approx(alone["eval_mean_return"], abs=1e-12)
     assert row["success_rate"] == alone["success_rate"]
+
+
+def test_reevaluating_a_folders_policies_on_the_same_episodes_gives_its_figures(
+        comparison: tuple[Path, list[str]], tmp_path: Path) -> None:
+    """``docs/results/deployed/reevaluate.py`` on the evaluation's own seed and episode
+    count reproduces ``trainings.csv``'s figures, both ways; on more episodes it gives
+    that many, and a second call keeps the first one's rows of other trainings."""
+    out, _ = comparison
+    script = REPO / "docs" / "results" / "deployed" / "reevaluate.py"
+    table = tmp_path / "again.csv"
+
+    def reevaluate(*args: str) -> pd.DataFrame:
+        done = subprocess.run([sys.executable, str(script), f"tiny={out}", *args,
+                               "--out", str(table)], cwd=REPO, capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return pd.read_csv(table)
+
+    again = reevaluate("--robots", "four_wheeler", "--episodes", "3", "--offset", "1")
+    trainings = pd.read_csv(out / "trainings.csv")
+    first = trainings[(trainings["robot"] == "four_wheeler") & ~trainings["confirmation"]]
+    assert sorted(again["seed"]) == sorted(first["seed"]) == [0, 1]
+    merged = again.merge(first, on="seed")
+    np.testing.assert_allclose(merged["success"], merged["success_rate"])
+    np.testing.assert_allclose(merged["noisy_success"], merged["stochastic_success_rate"])
+    np.testing.assert_allclose(merged["eval_return"], merged["eval_mean_return"], rtol=1e-6)
+    np.testing.assert_allclose(merged["noisy_return"], merged["stochastic_mean_return"],
+                               rtol=1e-6)
+
+    more = reevaluate("--robots", "twisted_four_wheeler", "--episodes", "5")
+    assert set(more["robot"]) == {"four_wheeler", "twisted_four_wheeler"}, "the first kept"
+    assert more.groupby("robot")["episodes"].first().to_dict() == {
+        "four_wheeler": 3, "twisted_four_wheeler": 5}
+    summary = table.with_suffix(".md").read_text()
+    twisted = (trainings["robot"] == "twisted_four_wheeler").sum()  # its confirmation too
+    assert f"| tiny | cluttered | twisted_four_wheeler | {twisted} | 5 |" in summary, summary

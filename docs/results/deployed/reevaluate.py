@@ -9,10 +9,10 @@ evaluation after training's seed + 1 nor the periodic one's seed + 2).
 Twenty episodes put a success rate near 0.85 within about 0.08 (one standard error);
 the gap between the mean action and the noisy policy, measured on the same few
 episodes, is that noisy too. Writes one row per training (the deterministic and the
-noisy success and mean return on the new episodes) as each one is done, then, per
-lever, arena and robot, the mean over seeds, the worst seed and the gap (beside it, the
-same ``.md``, and on the screen). An
-earlier ``--out`` file keeps its rows for the trainings not given again.
+noisy success and mean return on the new episodes, beside the evaluation after
+training's success, ``first_``) as each one is done, then, per lever, arena and robot,
+the mean over seeds, the worst seed and the gap (beside it, the same ``.md``, and on
+the screen). An earlier ``--out`` file keeps its rows for the trainings not given again.
 """
 
 from __future__ import annotations
@@ -57,8 +57,8 @@ def reevaluate(lever: str, folder: Path, *, episodes: int, offset: int,
         yield {"lever": lever, "arena": row.arena, "robot": row.robot, "seed": row.seed,
                "episodes": episodes, "success": det.success_rate,
                "noisy_success": noisy.success_rate, "eval_return": det.mean_return,
-               "noisy_return": noisy.mean_return, "success_20": row.success_rate,
-               "noisy_success_20": row.stochastic_success_rate}
+               "noisy_return": noisy.mean_return, "first_success": row.success_rate,
+               "first_noisy_success": row.stochastic_success_rate}
 
 
 def write(out: Path, rows: list[dict[str, object]]) -> pd.DataFrame:
@@ -77,15 +77,16 @@ def write(out: Path, rows: list[dict[str, object]]) -> pd.DataFrame:
 
 def cells(table: pd.DataFrame) -> pd.DataFrame:
     """Per lever, arena and robot: mean and worst seed of the new evaluation, the gap
-    (deterministic minus noisy) and the same mean on the first 20 episodes."""
+    (deterministic minus noisy) and the same of the evaluation after training
+    (``first_``: ``trainings.csv``'s, on ``learner.eval_episodes`` episodes, seed + 1)."""
     grouped = table.groupby(["lever", "arena", "robot"], sort=True)
     out = grouped.agg(seeds=("seed", "size"), episodes=("episodes", "first"),
                       success=("success", "mean"), worst=("success", "min"),
                       noisy_success=("noisy_success", "mean"),
-                      success_20=("success_20", "mean"),
-                      noisy_success_20=("noisy_success_20", "mean")).reset_index()
+                      first_success=("first_success", "mean"),
+                      first_noisy_success=("first_noisy_success", "mean")).reset_index()
     out["gap"] = out["success"] - out["noisy_success"]
-    out["gap_20"] = out["success_20"] - out["noisy_success_20"]
+    out["first_gap"] = out["first_success"] - out["first_noisy_success"]
     return out
 
 
