@@ -441,11 +441,12 @@ EXCLUDED: dict[str, str] = {
     "--out docs/results/deployed/reevaluated.csv":
         "runs the policies of the trainings the commands above make on 100 more episodes "
         "each (about 2 minutes per cluttered training)",
-    "python docs/results/deployed/reevaluate.py "
-    "const_lr_epochs8=runs/deployed/const_lr_epochs8_gap --robots four_wheeler "
-    "--out docs/results/deployed/reevaluated.csv":
-        "runs the policies of the trainings a command above makes on 100 more episodes "
-        "each (about 2 minutes per training)",
+    **{"python docs/results/deployed/reevaluate.py "
+       f"const_lr_epochs8=runs/deployed/const_lr_epochs8_gap --robots {robots} "
+       "--out docs/results/deployed/reevaluated.csv":
+       "runs the policies of the trainings a command above makes on 100 more episodes "
+       "each (about 2 minutes per training)"
+       for robots in ("four_wheeler", "snake --seeds 0 1 2 3 4")},
     "python docs/results/deployed/mechanism.py runs/deployed/stall_cluttered "
     "four_wheeler_seed1 four_wheeler_seed4 --out docs/results/deployed/mechanism_stall.csv":
         "reads the trainings' recordings, which the commands above make",

@@ -387,8 +387,11 @@ def test_reevaluating_a_folders_policies_on_the_same_episodes_gives_its_figures(
     np.testing.assert_allclose(merged["noisy_return"], merged["stochastic_mean_return"],
                                rtol=1e-6)
 
+    one = reevaluate("--robots", "twisted_four_wheeler", "--seeds", "1", "--episodes", "5")
+    assert sorted(zip(one["robot"], one["seed"], strict=True)) == [
+        ("four_wheeler", 0), ("four_wheeler", 1), ("twisted_four_wheeler", 1)], "the first kept"
     more = reevaluate("--robots", "twisted_four_wheeler", "--episodes", "5")
-    assert set(more["robot"]) == {"four_wheeler", "twisted_four_wheeler"}, "the first kept"
+    assert set(more["robot"]) == {"four_wheeler", "twisted_four_wheeler"}
     assert more.groupby("robot")["episodes"].first().to_dict() == {
         "four_wheeler": 3, "twisted_four_wheeler": 5}
     summary = table.with_suffix(".md").read_text()

@@ -37,13 +37,15 @@ KEY = ["lever", "arena", "robot", "seed"]
 
 
 def reevaluate(lever: str, folder: Path, *, episodes: int, offset: int,
-               robots: list[str] | None = None) -> Iterator[dict[str, object]]:
-    """One row per finished training of ``folder`` (of ``robots``, when given): its
-    policy on ``episodes`` new episodes, deterministically and with its noise."""
+               robots: list[str] | None = None, seeds: list[int] | None = None
+               ) -> Iterator[dict[str, object]]:
+    """One row per finished training of ``folder`` (of ``robots`` and ``seeds``, when
+    given): its policy on ``episodes`` new episodes, deterministically and with its
+    noise."""
     layout = RetrainLayout(folder)
     config = run_config(folder)
     for row in read_trainings(layout.trainings).itertuples():
-        if robots and row.robot not in robots:
+        if (robots and row.robot not in robots) or (seeds and row.seed not in seeds):
             continue
         robot = load_robot(layout.robot(str(row.robot)), config.limits)
         policy = load_checkpoint(layout.policy(str(row.name)), robot=robot,
@@ -98,6 +100,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the episodes' seed: the training's seed + this")
     parser.add_argument("--robots", nargs="+", metavar="ROBOT",
                         help="only these robots' trainings (trainings.csv's robot column)")
+    parser.add_argument("--seeds", nargs="+", type=int, metavar="SEED",
+                        help="only the trainings of these seeds")
     parser.add_argument("--out", type=Path, required=True, help="the CSV to write")
     args = parser.parse_args(argv)
     if args.episodes < 1:
@@ -111,11 +115,12 @@ def main(argv: list[str] | None = None) -> int:
     rows: list[dict[str, object]] = []
     for lever, folder in given:
         for row in reevaluate(lever, folder, episodes=args.episodes, offset=args.offset,
-                              robots=args.robots):
+                              robots=args.robots, seeds=args.seeds):
             rows.append(row)
             table = write(args.out, rows)  # after each training: an interruption keeps them
     if not rows:
-        parser.error("no training to evaluate (check --robots against trainings.csv)")
+        parser.error("no training to evaluate: check --robots and --seeds against "
+                     "trainings.csv")
     summary = markdown_table(cells(table))
     args.out.with_suffix(".md").write_text(summary + "\n")
     print(summary)
