@@ -437,7 +437,6 @@ EXCLUDED: dict[str, str] = {
     "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_others "
     "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_gap_clean "
     "const_lr_late_anneal=runs/deployed/const_lr_late_anneal_clean_rest "
-    "--robots four_wheeler crawler steering_car twisted_four_wheeler snake scoop_car "
     "--out docs/results/deployed/reevaluated.csv":
         "runs the policies of the trainings the commands above make on 100 more episodes "
         "each (about 2 minutes per cluttered training)",
