@@ -63,23 +63,23 @@ def reevaluate(lever: str, folder: Path, *, episodes: int, offset: int,
                "first_noisy_success": row.stochastic_success_rate}
 
 
-def write(out: Path, rows: list[dict[str, object]]) -> pd.DataFrame:
-    """``out`` with ``rows`` in place of its rows of the same trainings, sorted."""
+def write(out: Path, earlier: pd.DataFrame | None, rows: list[dict[str, object]]
+          ) -> pd.DataFrame:
+    """Write ``out``: ``rows``, and the rows of ``earlier`` (the file as it was before
+    this call of the script) of the trainings ``rows`` does not give, sorted."""
     table = new = pd.DataFrame(rows)
-    if out.is_file():
-        old = pd.read_csv(out)
-        kept = old.merge(new[KEY], on=KEY, how="left", indicator=True)
-        table = pd.concat([old[(kept["_merge"] == "left_only").to_numpy()], new],
+    if earlier is not None:
+        kept = earlier.merge(new[KEY], on=KEY, how="left", indicator=True)
+        table = pd.concat([earlier[(kept["_merge"] == "left_only").to_numpy()], new],
                           ignore_index=True)
     table = table.sort_values(KEY, ignore_index=True)
-    out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(out, index=False)
     return table
 
 
 def cells(table: pd.DataFrame) -> pd.DataFrame:
     """Per lever, arena and robot: mean and worst seed of the new evaluation, the gap
-    (deterministic minus noisy) and the same of the evaluation after training
+    (noisy minus deterministic, as ``table.py``'s) and the same of the evaluation after training
     (``first_``: ``trainings.csv``'s, on ``learner.eval_episodes`` episodes, seed + 1)."""
     grouped = table.groupby(["lever", "arena", "robot"], sort=True)
     out = grouped.agg(seeds=("seed", "size"), episodes=("episodes", "first"),
@@ -87,8 +87,8 @@ def cells(table: pd.DataFrame) -> pd.DataFrame:
                       noisy_success=("noisy_success", "mean"),
                       first_success=("first_success", "mean"),
                       first_noisy_success=("first_noisy_success", "mean")).reset_index()
-    out["gap"] = out["success"] - out["noisy_success"]
-    out["first_gap"] = out["first_success"] - out["first_noisy_success"]
+    out["gap"] = out["noisy_success"] - out["success"]
+    out["first_gap"] = out["first_noisy_success"] - out["first_success"]
     return out
 
 
@@ -112,12 +112,14 @@ def main(argv: list[str] | None = None) -> int:
         if not sep or not lever or not (Path(folder) / "trainings.csv").is_file():
             parser.error(f"{item}: expected LEVER=RETRAIN_DIR, a folder with trainings.csv")
         given.append((lever, Path(folder)))
+    earlier = pd.read_csv(args.out) if args.out.is_file() else None
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, object]] = []
     for lever, folder in given:
         for row in reevaluate(lever, folder, episodes=args.episodes, offset=args.offset,
                               robots=args.robots, seeds=args.seeds):
             rows.append(row)
-            table = write(args.out, rows)  # after each training: an interruption keeps them
+            table = write(args.out, earlier, rows)  # after each one: an interruption keeps them
     if not rows:
         parser.error("no training to evaluate: check --robots and --seeds against "
                      "trainings.csv")
