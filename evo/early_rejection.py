@@ -23,6 +23,9 @@ episodes):
   per env step, recorded for every batch). It needs no finished episode: where episodes
   run to ``t_max`` (the robots a rule stops) it is their return at that rate, and where
   they end early in success it overstates it, so it errs towards training on.
+
+scipy is imported inside the functions that use it: it is the slowest import on the path
+of ``evo/main.py``, which loads this module whether or not the run uses it.
 """
 
 from __future__ import annotations
@@ -35,9 +38,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import scipy.integrate
-import scipy.optimize
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 SLOPE_STEPS = 1_000
@@ -130,6 +130,8 @@ def late_slope(prefix: Curve, cut: float) -> float:
     half = prefix.select(prefix.steps >= cut / 2)
     if len(np.unique(half.steps)) < 2:
         return np.nan
+    import scipy.stats  # where it is used: see the module's docstring
+
     return float(scipy.stats.theilslopes(half.returns, half.steps).slope) * SLOPE_STEPS
 
 
@@ -140,6 +142,8 @@ def prefix_area(prefix: Curve) -> float:
     span = prefix.steps[-1] - prefix.steps[0]
     if span == 0:
         return float(prefix.returns.mean())
+    import scipy.integrate  # where it is used: see the module's docstring
+
     return float(scipy.integrate.trapezoid(prefix.returns, prefix.steps) / span)
 
 
@@ -190,6 +194,8 @@ def saturating_extrapolation(prefix: Curve, budget: float, fallback: float) -> f
     if len(tau) < 4 or np.ptp(tau) == 0:
         return fallback
     params = _grid_fit(tau, y)
+    import scipy.optimize  # where it is used: see the module's docstring
+
     spread = 1.4826 * np.median(np.abs(saturating(tau, *params) - y))
     try:
         with warnings.catch_warnings():

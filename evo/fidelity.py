@@ -17,6 +17,9 @@ robots with the same rank statistics.
 * ``top_quarter``: the share of one seed's top 25 % that is also in the other's;
 * ``clears_baseline``: the share of structures whose fitness (mean over seeds) clears
   the random learner's on the same structure by more than :data:`CLEAR_MARGIN`.
+
+scipy is imported inside the functions that use it: it is the slowest import on the path
+of ``evo/main.py``, which loads this module whether or not the run uses it.
 """
 
 from __future__ import annotations
@@ -29,7 +32,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 Statistic = Callable[..., Any]
@@ -53,6 +55,8 @@ cannot move (its fitness is −1 to about 1e-6)."""
 
 def spearman(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
     """Spearman ρ along ``axis`` (Pearson correlation of average ranks)."""
+    import scipy.stats  # where it is used: see the module's docstring
+
     rx = scipy.stats.rankdata(x, axis=axis)
     ry = scipy.stats.rankdata(y, axis=axis)
     return scipy.stats.pearsonr(rx, ry, axis=axis).statistic
@@ -60,6 +64,8 @@ def spearman(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
 
 def kendall(x: ArrayLike, y: ArrayLike, axis: int = -1) -> Any:
     """Kendall τ-b along ``axis``."""
+    import scipy.stats  # where it is used: see the module's docstring
+
     return scipy.stats.kendalltau(x, y, axis=axis).statistic
 
 
@@ -166,6 +172,8 @@ def agreement(trainings: pd.DataFrame, value: str = "fitness") -> dict[str, floa
     columns = [wide[c].to_numpy(dtype=float) for c in wide.columns]
     out: dict[str, float] = dict.fromkeys(METRICS, math.nan)
     if k >= 2 and len(wide) >= 3:
+        import scipy.stats  # where it is used: see the module's docstring
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", scipy.stats.ConstantInputWarning)
             out.update({name: float(statistic(*columns))

@@ -164,12 +164,44 @@ def test_the_learning_rate_falls_to_zero_only_when_annealed(anneal_lr: bool) -> 
     np.testing.assert_allclose(result.curve["train/lr"].to_numpy(), expected, rtol=1e-6)
 
 
+def test_the_handed_back_actor_is_the_mean_of_the_weights_after_each_update_averaged() -> None:
+    """``average_from``: the training acts as without it (the same curve), and hands back
+    the actor whose weights are the mean of those after each update from that share of
+    the budget on: here the last two of four batches, the last policies of the same
+    training stopped after three batches and run to the end without averaging."""
+    config = dataclasses.replace(SMALL, anneal_lr=False, eval_interval=SMALL.frames_per_batch,
+                                 eval_interval_episodes=2)
+    batch = SMALL.frames_per_batch
+
+    def trained(budget: int, **fields: object):  # noqa: ANN202
+        return train_ppo(FOUR_WHEELER, physics=PHYSICS, env=NEAR, budget=budget, seed=3,
+                         config=dataclasses.replace(config, **fields))  # type: ignore[arg-type]
+
+    averaged, plain, third = trained(4 * batch, average_from=0.75), trained(4 * batch), \
+        trained(3 * batch)
+    keys = [c for c in plain.curve.columns if c.startswith("train/") or c == "env_steps"]
+    pd.testing.assert_frame_equal(averaged.curve[keys], plain.curve[keys])
+    assert averaged.fitness == plain.fitness
+    mine = dict(averaged.policy.actor.named_parameters())
+    for name, last in plain.policy.actor.named_parameters():
+        before = dict(third.policy.actor.named_parameters())[name]
+        torch.testing.assert_close(mine[name], (before + last) / 2)
+    assert any(not torch.equal(mine[name], last)
+               for name, last in plain.policy.actor.named_parameters()), "not the last policy"
+    # the periodic evaluations of the averaged batches are of the averaged actor
+    last = evaluate_policy(FOUR_WHEELER, averaged.policy, physics=PHYSICS, env=NEAR,
+                           episodes=2, seed=3 + 2)
+    assert averaged.curve["eval/mean_return"].iloc[-1] == pytest.approx(last.mean_return)
+    assert averaged.evaluation == (last.success_rate, last.mean_return)
+
+
 @pytest.mark.parametrize(("fields", "message"), [
     (dict(keep_best=True), "keep_best needs periodic evaluations"),
     (dict(eval_interval=-1), "eval_interval must be >= 0"),
     (dict(eval_interval_episodes=0), "eval_interval_episodes must be >= 1"),
     (dict(final_log_std=3.0), "final_log_std must be in"),
     (dict(anneal_from=1.0), "anneal_from must be in"),
+    (dict(average_from=1.0), "average_from must be in"),
 ])
 def test_bad_settings_name_their_key(fields: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -82,6 +82,11 @@ class LearnerConfig:
         anneal_from: The fraction of the budget at which that bound starts to fall
             (before it the bound is ``init_log_std``): 0 anneals over the whole
             budget, 0.5 over its second half.
+        average_from: Average the actor's weights over the updates from this fraction
+            of the budget on (stochastic weight averaging, Izmailov et al. 2018: the
+            uniform mean of the weights after each batch's update) and hand back, and
+            evaluate from then on, the averaged actor; the training's own batches keep
+            acting with the current weights. None: no averaging.
     """
 
     update: bool = True
@@ -110,6 +115,7 @@ class LearnerConfig:
     bound_mean: bool = False
     final_log_std: float | None = None
     anneal_from: float = 0.0
+    average_from: float | None = None
 
     def __post_init__(self) -> None:
         at_least(self, 1, "total_steps", "num_envs", "rollout_steps", "epochs",
@@ -133,6 +139,9 @@ class LearnerConfig:
         if not 0 <= self.anneal_from < 1:
             raise ValueError(f"anneal_from must be in [0, 1) (a fraction of the budget), "
                              f"got {self.anneal_from}")
+        if self.average_from is not None and not 0 <= self.average_from < 1:
+            raise ValueError(f"average_from must be in [0, 1) (a fraction of the budget), "
+                             f"or null for none, got {self.average_from}")
         if self.keep_best and not self.eval_interval:
             raise ValueError("keep_best needs periodic evaluations to choose from: set "
                              "eval_interval (env steps) > 0")

@@ -31,7 +31,7 @@ import copy
 import math
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import torch
 from tensordict import TensorDictBase
+from torch.optim.swa_utils import AveragedModel
 from torchrl.collectors import Collector
 from torchrl.objectives import ClipPPOLoss
 from torchrl.objectives.value import GAE
@@ -283,6 +284,58 @@ class PeriodicEvaluation:
         return self.best_steps, self.best
 
 
+class WeightAverage:
+    """The actor's weights averaged over the updates from ``average_from`` of the budget
+    on (``torch.optim.swa_utils.AveragedModel``: the uniform mean of the weights after
+    each batch's update). The training acts with the current weights; the periodic
+    evaluations from then on, and the policy handed back, use the averaged ones with the
+    current observation statistics (buffers are not averaged)."""
+
+    def __init__(self, policy: Policy, start: float) -> None:
+        self.start = start
+        self.model = AveragedModel(policy.actor, use_buffers=False)
+
+    @property
+    def count(self) -> int:
+        """Updates averaged so far."""
+        return int(self.model.n_averaged)
+
+    def update(self, policy: Policy, steps: int) -> None:
+        """Fold the actor's weights after the update of the batch that ended at
+        ``steps`` env steps into the average, from ``start`` env steps on."""
+        if steps >= self.start:
+            self.model.update_parameters(policy.actor)
+
+    def _load(self, policy: Policy) -> list[torch.Tensor]:
+        """Put the averaged weights into the actor; returns the weights they replace."""
+        current = [p.detach().clone() for p in policy.actor.parameters()]
+        with torch.no_grad():
+            for mine, average in zip(policy.actor.parameters(), self.model.module.parameters(),
+                                     strict=True):
+                mine.copy_(average)
+        return current
+
+    @contextmanager
+    def swapped(self, policy: Policy) -> Iterator[None]:
+        """The averaged weights in the actor inside the block (once any are averaged),
+        the current ones again after it."""
+        if not self.count:
+            yield
+            return
+        current = self._load(policy)
+        try:
+            yield
+        finally:
+            with torch.no_grad():
+                for mine, value in zip(policy.actor.parameters(), current, strict=True):
+                    mine.copy_(value)
+
+    def hand_back(self, policy: Policy) -> None:
+        """Leave the averaged weights in the actor (if any were averaged)."""
+        if self.count:
+            self._load(policy)
+
+
 def _train(
     robot: Robot,
     physics: PhysicsParams,
@@ -300,6 +353,8 @@ def _train(
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     _anneal(policy, config, 0, budget)
+    average = (WeightAverage(policy, config.average_from * budget)
+               if config.average_from is not None and config.update else None)
     collector = Collector(env, policy.sampler(), frames_per_batch=config.frames_per_batch,
                           total_frames=frames, auto_register_policy_transforms=False,
                           track_traj_ids=False)
@@ -321,7 +376,12 @@ def _train(
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
             _anneal(policy, config, steps, budget)  # the bound of the next batch
-            row.update(periodic(policy, steps, last=steps >= frames) if periodic else {})
+            if average is not None:
+                average.update(policy, steps)
+            evaluated: AbstractContextManager[None] = (
+                average.swapped(policy) if average is not None else nullcontext())
+            with evaluated:
+                row.update(periodic(policy, steps, last=steps >= frames) if periodic else {})
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -335,6 +395,8 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
+    if average is not None:
+        average.hand_back(policy)
     kept_at, evaluation = periodic.finish(policy, timing) if periodic else (None, None)
     policy.head.log_std_cap = None  # the trained policy's own spread from here on
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
