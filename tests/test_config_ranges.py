@@ -129,7 +129,6 @@ BAD: dict[str, Any] = {
     "learner.eval_interval": -1,
     "learner.eval_interval_episodes": 0,
     "learner.anneal_from": 1.0,
-    "learner.average_from": 1.0,
     "ga.population_size": 1,
     "ga.robot_budget": 2,
     "ga.selection.epsilon": 0.0,

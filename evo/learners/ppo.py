@@ -31,7 +31,7 @@ import copy
 import math
 import time
 from collections.abc import Iterator
-from contextlib import AbstractContextManager, contextmanager, nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -295,6 +295,14 @@ class WeightAverage:
         self.start = start
         self.model = AveragedModel(policy.actor, use_buffers=False)
 
+    @classmethod
+    def of(cls, policy: Policy, config: LearnerConfig, budget: int) -> WeightAverage | None:
+        """The average ``config.average_from`` asks for over ``budget`` env steps; None
+        without it, or for a learner that does not update."""
+        if config.average_from is None or not config.update:
+            return None
+        return cls(policy, config.average_from * budget)
+
     @property
     def count(self) -> int:
         """Updates averaged so far."""
@@ -353,8 +361,7 @@ def _train(
     loss, gae, optimizer = _objective(policy, config)
     frames = math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
     _anneal(policy, config, 0, budget)
-    average = (WeightAverage(policy, config.average_from * budget)
-               if config.average_from is not None and config.update else None)
+    average = WeightAverage.of(policy, config, budget)
     collector = Collector(env, policy.sampler(), frames_per_batch=config.frames_per_batch,
                           total_frames=frames, auto_register_policy_transforms=False,
                           track_traj_ids=False)
@@ -375,13 +382,7 @@ def _train(
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
-            _anneal(policy, config, steps, budget)  # the bound of the next batch
-            if average is not None:
-                average.update(policy, steps)
-            evaluated: AbstractContextManager[None] = (
-                average.swapped(policy) if average is not None else nullcontext())
-            with evaluated:
-                row.update(periodic(policy, steps, last=steps >= frames) if periodic else {})
+            row.update(_after_update(policy, config, steps, budget, periodic, average))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -395,15 +396,40 @@ def _train(
     # When no episode ended within the budget, judge the running ones.
     fitness = returns_sum / returns_count if returns_count else float(np.mean(env.core.returns))
     timing.update(physics=env.core.physics_seconds, env=env.step_seconds)
-    if average is not None:
-        average.hand_back(policy)
-    kept_at, evaluation = periodic.finish(policy, timing) if periodic else (None, None)
-    policy.head.log_std_cap = None  # the trained policy's own spread from here on
+    kept_at, evaluation = _hand_back(policy, periodic, average, timing)
     return TrainResult(fitness=fitness, curve=pd.DataFrame(rows), policy=policy,
                        env_steps=steps, episodes=returns_count,
                        wall_seconds=time.perf_counter() - start,
                        unstable=env.core.unstable_count, timing=timing, stopped_early=stopped,
                        kept_at=kept_at, evaluation=evaluation)
+
+
+def _after_update(policy: Policy, config: LearnerConfig, steps: int, budget: int,
+                  periodic: PeriodicEvaluation | None, average: WeightAverage | None
+                  ) -> dict[str, float]:
+    """After the update of the batch that ended at ``steps``: the spread's bound for the
+    next batch, the weights folded into the average, and the periodic evaluation's row
+    values (of the averaged actor, once there is one)."""
+    _anneal(policy, config, steps, budget)
+    last = steps >= math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
+    if average is None:
+        return periodic(policy, steps, last=last) if periodic else {}
+    average.update(policy, steps)
+    with average.swapped(policy):
+        return periodic(policy, steps, last=last) if periodic else {}
+
+
+def _hand_back(policy: Policy, periodic: PeriodicEvaluation | None,
+               average: WeightAverage | None, timing: dict[str, float]
+               ) -> tuple[int | None, tuple[float, float] | None]:
+    """Leave in ``policy`` the weights it hands back: the best periodic evaluation's
+    with ``keep_best``, else the averaged ones with ``average_from``, else the last; with
+    its own spread, unbounded. Returns what ``PeriodicEvaluation.finish`` does."""
+    if average is not None:
+        average.hand_back(policy)
+    kept = periodic.finish(policy, timing) if periodic else (None, None)
+    policy.head.log_std_cap = None  # the trained policy's own spread from here on
+    return kept
 
 
 def _setup(robot: Robot, physics: PhysicsParams, env_config: EnvConfig, config: LearnerConfig,
