@@ -183,9 +183,9 @@ def test_the_handed_back_actor_is_the_mean_of_the_weights_after_each_update_aver
     pd.testing.assert_frame_equal(averaged.curve[keys], plain.curve[keys])
     assert averaged.fitness == plain.fitness
     mine = dict(averaged.policy.actor.named_parameters())
+    before = dict(third.policy.actor.named_parameters())
     for name, last in plain.policy.actor.named_parameters():
-        before = dict(third.policy.actor.named_parameters())[name]
-        torch.testing.assert_close(mine[name], (before + last) / 2)
+        torch.testing.assert_close(mine[name], (before[name] + last) / 2)
     assert any(not torch.equal(mine[name], last)
                for name, last in plain.policy.actor.named_parameters()), "not the last policy"
     # the periodic evaluations of the averaged batches are of the averaged actor

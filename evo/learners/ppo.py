@@ -30,8 +30,8 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -314,14 +314,11 @@ class WeightAverage:
         if steps >= self.start:
             self.model.update_parameters(policy.actor)
 
-    def _load(self, policy: Policy) -> list[torch.Tensor]:
-        """Put the averaged weights into the actor; returns the weights they replace."""
-        current = [p.detach().clone() for p in policy.actor.parameters()]
-        with torch.no_grad():
-            for mine, average in zip(policy.actor.parameters(), self.model.module.parameters(),
-                                     strict=True):
-                mine.copy_(average)
-        return current
+    @staticmethod
+    @torch.no_grad()
+    def _copy(into: Iterator[torch.nn.Parameter], values: Iterable[torch.Tensor]) -> None:
+        for mine, value in zip(into, values, strict=True):
+            mine.copy_(value)
 
     @contextmanager
     def swapped(self, policy: Policy) -> Iterator[None]:
@@ -330,18 +327,17 @@ class WeightAverage:
         if not self.count:
             yield
             return
-        current = self._load(policy)
+        current = [p.detach().clone() for p in policy.actor.parameters()]
+        self._copy(policy.actor.parameters(), self.model.module.parameters())
         try:
             yield
         finally:
-            with torch.no_grad():
-                for mine, value in zip(policy.actor.parameters(), current, strict=True):
-                    mine.copy_(value)
+            self._copy(policy.actor.parameters(), current)
 
     def hand_back(self, policy: Policy) -> None:
         """Leave the averaged weights in the actor (if any were averaged)."""
         if self.count:
-            self._load(policy)
+            self._copy(policy.actor.parameters(), self.model.module.parameters())
 
 
 def _train(
@@ -382,7 +378,8 @@ def _train(
             with torch_threads(env_config.nthread):  # the physics threads are idle meanwhile
                 row.update(_learn(batch, loss, gae, optimizer, policy, config, steps, budget,
                                   scale))
-            row.update(_after_update(policy, config, steps, budget, periodic, average))
+            row.update(_after_update(policy, config, steps, budget, steps >= frames, periodic,
+                                     average))
             row["wall_seconds"] = time.perf_counter() - start
             rows.append(row)
             stop = on_curve is not None and bool(on_curve(row))
@@ -404,18 +401,16 @@ def _train(
                        kept_at=kept_at, evaluation=evaluation)
 
 
-def _after_update(policy: Policy, config: LearnerConfig, steps: int, budget: int,
+def _after_update(policy: Policy, config: LearnerConfig, steps: int, budget: int, last: bool,
                   periodic: PeriodicEvaluation | None, average: WeightAverage | None
                   ) -> dict[str, float]:
-    """After the update of the batch that ended at ``steps``: the spread's bound for the
-    next batch, the weights folded into the average, and the periodic evaluation's row
-    values (of the averaged actor, once there is one)."""
+    """After the update of the batch that ended at ``steps`` (the ``last`` one): the
+    spread's bound for the next batch, the weights folded into the average, and the
+    periodic evaluation's row values (of the averaged actor, once there is one)."""
     _anneal(policy, config, steps, budget)
-    last = steps >= math.ceil(budget / config.frames_per_batch) * config.frames_per_batch
-    if average is None:
-        return periodic(policy, steps, last=last) if periodic else {}
-    average.update(policy, steps)
-    with average.swapped(policy):
+    if average is not None:
+        average.update(policy, steps)
+    with average.swapped(policy) if average is not None else nullcontext():
         return periodic(policy, steps, last=last) if periodic else {}
 
 
